@@ -1,0 +1,1 @@
+//! danced library.

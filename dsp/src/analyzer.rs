@@ -1,0 +1,345 @@
+//! The whole streaming analysis chain behind one `process` call per audio block.
+
+use crate::beat::BeatTracker;
+use crate::chroma::ChromaFilterbank;
+use crate::feature::{FeatureFrame, FeatureFramer};
+use crate::mel::{MEL_BANDS, MEL_FMAX, MEL_FMIN, MelFilterbank};
+use crate::meter::MeterTracker;
+use crate::onset::{OnsetDetector, OnsetPeakPicker};
+use crate::resample::StreamResampler;
+use crate::stft::Stft;
+use crate::{ANALYSIS_RATE, DspError, HOP, LONG_WINDOW, SHORT_WINDOW, hop_rate};
+
+/// Shift applied to onset and beat times relative to the short window's centre, in seconds.
+///
+/// A log-compressed flux rises as soon as an attack enters the newest part of the window, so the
+/// detection frame's centre lies after the attack; measured on click tracks (see the tests).
+pub const EVENT_TIME_OFFSET_S: f64 = -0.012;
+
+/// Which beat and onset tracker drives the events and phases.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BeatTrackerKind {
+    /// The built-in beat-pointer HMM over SuperFlux onset strength.
+    #[default]
+    Native,
+    /// aubio's tempo and onset objects (GPL-3.0; needs the `aubio` feature).
+    Aubio,
+}
+
+impl BeatTrackerKind {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Native => "native",
+            Self::Aubio => "aubio",
+        }
+    }
+}
+
+/// How to build an [`Analyzer`].
+#[derive(Clone, Copy, Debug)]
+pub struct AnalyzerConfig {
+    /// Input sample rate in Hz.
+    pub sample_rate: u32,
+    /// Interleaved input channels.
+    pub channels: u16,
+    /// Model frame rate in Hz for [`FeatureFrame`]s (`None`: no feature frames).
+    pub model_rate: Option<f64>,
+    /// Beat and onset tracker.
+    pub tracker: BeatTrackerKind,
+}
+
+/// Everything known about one analysis hop (11.6 ms). Slices borrow the analyzer's buffers.
+#[derive(Clone, Copy, Debug)]
+pub struct HopFrame<'a> {
+    /// Hop number from the start of the stream.
+    pub index: u64,
+    /// Audio time described (centre of the short window), in seconds.
+    pub time_s: f64,
+    /// Stream time at which this hop was computed, in seconds.
+    pub decided_at_s: f64,
+    /// Log-mel power spectrum, [`MEL_BANDS`] values in dB.
+    pub mel_db: &'a [f32],
+    /// RMS energy of the short window in dBFS (≥ −120).
+    pub energy_db: f32,
+    /// Onset strength (SuperFlux).
+    pub onset_strength: f32,
+    /// Onset strength in the bass bands.
+    pub bass_onset_strength: f32,
+    /// Chroma, index 0 = C.
+    pub chroma: &'a [f32; 12],
+    /// Tempo in BPM (0 while no beat is heard).
+    pub tempo_bpm: f64,
+    /// Confidence of the tempo in [0, 1].
+    pub tempo_confidence: f64,
+    /// Position in the beat in [0, 1).
+    pub beat_phase: f64,
+    /// Predicted time of the next beat, in seconds.
+    pub next_beat_s: f64,
+    /// Position in the bar in [0, 1).
+    pub bar_phase: f64,
+    /// Position of the current beat in its bar (1 = downbeat).
+    pub beat_in_bar: usize,
+    /// Beats per bar (3 or 4).
+    pub beats_per_bar: usize,
+    /// Whether a beat is heard.
+    pub locked: bool,
+}
+
+/// An onset, reported by the causal peak picker.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OnsetEvent {
+    /// When the onset happened, in seconds.
+    pub time_s: f64,
+    /// Its onset strength.
+    pub strength: f32,
+    /// Stream time at which it was reported, in seconds.
+    pub decided_at_s: f64,
+}
+
+/// A beat, reported by the causal beat tracker.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BeatEvent {
+    /// When the beat happened, in seconds.
+    pub time_s: f64,
+    /// Position in the bar (1 = downbeat).
+    pub beat_in_bar: usize,
+    /// Beats per bar (3 or 4).
+    pub beats_per_bar: usize,
+    /// Tempo at this beat, in BPM.
+    pub tempo_bpm: f64,
+    /// Stream time at which the tracker committed to it, in seconds.
+    pub decided_at_s: f64,
+}
+
+/// Receives the analysis as it happens. Every method has an empty default.
+pub trait AnalysisSink {
+    /// One analysis hop.
+    fn hop(&mut self, _hop: &HopFrame) {}
+    /// An onset.
+    fn onset(&mut self, _onset: &OnsetEvent) {}
+    /// A beat.
+    fn beat(&mut self, _beat: &BeatEvent) {}
+    /// A feature frame at the model rate.
+    fn feature(&mut self, _frame: &FeatureFrame) {}
+}
+
+/// Onset and beat decisions for one hop, from whichever tracker is selected.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct TrackerOutput {
+    pub(crate) onset: Option<f64>,
+    beat: Option<f64>,
+    tempo_bpm: f64,
+    tempo_confidence: f64,
+    beat_phase: f64,
+    frames_to_next_beat: f64,
+    locked: bool,
+}
+
+/// Native tracker: SuperFlux peak picking and the beat-pointer HMM.
+struct NativeTracker {
+    picker: OnsetPeakPicker,
+    beats: BeatTracker,
+}
+
+enum Tracker {
+    Native(Box<NativeTracker>),
+    #[cfg(feature = "aubio")]
+    Aubio(Box<crate::aubio_tracker::AubioTracker>),
+}
+
+/// Per-hop analysis state; split from the resampler so its callback can borrow it.
+struct Core {
+    history: Vec<f32>,
+    pending: usize,
+    samples_in: u64,
+    delay: usize,
+    hop_index: u64,
+    short: Stft,
+    long: Stft,
+    short_mag: Vec<f32>,
+    long_mag: Vec<f32>,
+    power: Vec<f32>,
+    mel_fb: MelFilterbank,
+    mel_db: Vec<f32>,
+    chroma_fb: ChromaFilterbank,
+    chroma: [f32; 12],
+    onsets: OnsetDetector,
+    tracker: Tracker,
+    meter: MeterTracker,
+    framer: Option<FeatureFramer>,
+}
+
+/// The streaming analysis: feed it interleaved PCM blocks of any size; it calls the sink for
+/// every hop, onset, beat and feature frame. Allocates only in [`Analyzer::new`].
+pub struct Analyzer {
+    resampler: StreamResampler,
+    core: Core,
+}
+
+impl Analyzer {
+    /// Builds the chain for the given input format.
+    pub fn new(config: AnalyzerConfig) -> Result<Self, DspError> {
+        let resampler = StreamResampler::new(config.sample_rate, config.channels)?;
+        if let Some(r) = config.model_rate
+            && !(r.is_finite() && (1.0..=hop_rate()).contains(&r))
+        {
+            return Err(DspError::FrameRate(r));
+        }
+        let fps = hop_rate();
+        let tracker = match config.tracker {
+            BeatTrackerKind::Native => Tracker::Native(Box::new(NativeTracker {
+                picker: OnsetPeakPicker::new(fps),
+                beats: BeatTracker::new(fps),
+            })),
+            #[cfg(feature = "aubio")]
+            BeatTrackerKind::Aubio => Tracker::Aubio(Box::new(crate::aubio_tracker::AubioTracker::new()?)),
+            #[cfg(not(feature = "aubio"))]
+            BeatTrackerKind::Aubio => return Err(DspError::TrackerUnavailable("aubio")),
+        };
+        let short = Stft::new(SHORT_WINDOW);
+        let long = Stft::new(LONG_WINDOW);
+        let core = Core {
+            history: vec![0.0; LONG_WINDOW],
+            pending: 0,
+            samples_in: 0,
+            delay: resampler.delay_samples(),
+            hop_index: 0,
+            short_mag: vec![0.0; short.bins()],
+            long_mag: vec![0.0; long.bins()],
+            power: vec![0.0; short.bins()],
+            mel_fb: MelFilterbank::new(MEL_BANDS, MEL_FMIN, MEL_FMAX, SHORT_WINDOW, ANALYSIS_RATE),
+            mel_db: vec![-120.0; MEL_BANDS],
+            chroma_fb: ChromaFilterbank::new(LONG_WINDOW, ANALYSIS_RATE),
+            chroma: [0.0; 12],
+            onsets: OnsetDetector::new(SHORT_WINDOW, ANALYSIS_RATE),
+            tracker,
+            meter: MeterTracker::new(),
+            framer: config.model_rate.map(FeatureFramer::new),
+            short,
+            long,
+        };
+        Ok(Self { resampler, core })
+    }
+
+    /// Feeds one block of interleaved samples; the sink hears everything it completes.
+    pub fn process(&mut self, interleaved: &[f32], sink: &mut impl AnalysisSink) {
+        let core = &mut self.core;
+        self.resampler.push(interleaved, &mut |mono, now| core.samples(mono, now, sink));
+    }
+
+    /// Latency of the short-window features: half the window plus the resampler delay, seconds.
+    pub fn short_latency_s(&self) -> f64 {
+        (SHORT_WINDOW / 2 + self.core.delay) as f64 / ANALYSIS_RATE as f64
+    }
+
+    /// Latency of chroma: half the long window plus the resampler delay, in seconds.
+    pub fn long_latency_s(&self) -> f64 {
+        (LONG_WINDOW / 2 + self.core.delay) as f64 / ANALYSIS_RATE as f64
+    }
+
+    /// Input time consumed so far, in seconds.
+    pub fn stream_time_s(&self) -> f64 {
+        self.resampler.consumed_frames() as f64 / self.resampler.input_rate() as f64
+    }
+}
+
+impl Core {
+    fn samples(&mut self, mono: &[f32], now: f64, sink: &mut impl AnalysisSink) {
+        let base = LONG_WINDOW - HOP;
+        for &x in mono {
+            self.history[base + self.pending] = x;
+            self.pending += 1;
+            self.samples_in += 1;
+            if self.pending == HOP {
+                self.hop(now, sink);
+                self.history.copy_within(HOP.., 0);
+                self.pending = 0;
+            }
+        }
+    }
+
+    fn hop(&mut self, now: f64, sink: &mut impl AnalysisSink) {
+        let sr = ANALYSIS_RATE as f64;
+        let end = self.samples_in as f64 - self.delay as f64;
+        let time_s = (end - (SHORT_WINDOW / 2) as f64) / sr;
+        let short_frame = &self.history[LONG_WINDOW - SHORT_WINDOW..];
+        self.short.magnitude(short_frame, &mut self.short_mag);
+        let energy = short_frame.iter().map(|x| x * x).sum::<f32>() / SHORT_WINDOW as f32;
+        let energy_db = (10.0 * (energy + 1e-12).log10()).max(-120.0);
+        for (p, m) in self.power.iter_mut().zip(&self.short_mag) {
+            *p = m * m;
+        }
+        self.mel_fb.apply(&self.power, &mut self.mel_db);
+        for v in self.mel_db.iter_mut() {
+            *v = (10.0 * (*v + 1e-12).log10()).max(-120.0);
+        }
+        if self.hop_index % 2 == 0 {
+            self.long.magnitude(&self.history, &mut self.long_mag);
+            self.chroma_fb.apply(&self.long_mag, &mut self.chroma);
+        }
+        let strength = self.onsets.process(&self.short_mag);
+        let bass = self.onsets.low_flux();
+        self.meter.frame(&self.chroma, bass);
+
+        let out = match &mut self.tracker {
+            Tracker::Native(n) => {
+                let onset = n.picker.process(strength).then_some(0.0);
+                let st = n.beats.process(strength);
+                TrackerOutput {
+                    onset,
+                    beat: st.beat_frames_ago,
+                    tempo_bpm: st.tempo_bpm,
+                    tempo_confidence: st.tempo_confidence,
+                    beat_phase: st.beat_phase,
+                    frames_to_next_beat: st.frames_to_next_beat,
+                    locked: st.locked,
+                }
+            }
+            #[cfg(feature = "aubio")]
+            Tracker::Aubio(a) => a.process(&self.history[LONG_WINDOW - HOP..]),
+        };
+
+        let fps = hop_rate();
+        if let Some(ago) = out.onset {
+            let e = OnsetEvent { time_s: time_s - ago / fps + EVENT_TIME_OFFSET_S, strength, decided_at_s: now };
+            sink.onset(&e);
+        }
+        if let Some(ago) = out.beat {
+            let (beat_in_bar, beats_per_bar) = self.meter.beat();
+            let e = BeatEvent {
+                time_s: time_s - ago / fps + EVENT_TIME_OFFSET_S,
+                beat_in_bar,
+                beats_per_bar,
+                tempo_bpm: out.tempo_bpm,
+                decided_at_s: now,
+            };
+            sink.beat(&e);
+        }
+        let hop = HopFrame {
+            index: self.hop_index,
+            time_s,
+            decided_at_s: now,
+            mel_db: &self.mel_db,
+            energy_db,
+            onset_strength: strength,
+            bass_onset_strength: bass,
+            chroma: &self.chroma,
+            tempo_bpm: out.tempo_bpm,
+            tempo_confidence: out.tempo_confidence,
+            beat_phase: out.beat_phase,
+            next_beat_s: time_s + EVENT_TIME_OFFSET_S + out.frames_to_next_beat / fps,
+            bar_phase: self.meter.bar_phase(out.beat_phase),
+            beat_in_bar: self.meter.beat_in_bar(),
+            beats_per_bar: self.meter.beats_per_bar(),
+            locked: out.locked,
+        };
+        sink.hop(&hop);
+        if let Some(framer) = self.framer.as_mut()
+            && let Some(frame) = framer.push(&hop)
+        {
+            sink.feature(&frame);
+        }
+        self.hop_index += 1;
+    }
+}

@@ -1,0 +1,305 @@
+//! Online beat tracking: a beat-pointer hidden Markov model filtered forward in time
+//! (the beat state space of Krebs, Böck & Widmer 2015, without look-ahead).
+//!
+//! Each state is (beat interval τ in frames, position φ within the beat). The position advances
+//! one frame per frame; at the end of a beat the interval may change, with a probability that
+//! falls off exponentially with the tempo ratio. Frames at the start of a beat expect onsets.
+//! The tracker keeps only the forward probabilities, so every decision uses the past alone.
+
+/// Slowest tempo tracked, in beats per minute.
+pub const MIN_BPM: f64 = 55.0;
+/// Fastest tempo tracked, in beats per minute.
+pub const MAX_BPM: f64 = 215.0;
+/// How sharply the tempo may change between beats (Krebs et al. use 100).
+const TRANSITION_LAMBDA: f64 = 100.0;
+/// One beat state per this many positions of a beat expects an onset.
+const OBSERVATION_LAMBDA: usize = 16;
+/// Slope of the log likelihood ratio of a beat against relative onset strength.
+const OBSERVATION_BETA: f64 = 1.0;
+/// Onset strength relative to its mean above which a frame is no more beat-like.
+const MAX_RELATIVE_STRENGTH: f32 = 8.0;
+/// Time constant of the activation's loudness normaliser, in seconds.
+const NORM_SECONDS: f64 = 3.0;
+/// Time constant of the periodicity evidence that gates beat output, in seconds.
+const EVIDENCE_SECONDS: f64 = 4.0;
+/// Log-likelihood ratio per frame (model vs. no-beat) below which no beats are reported.
+const EVIDENCE_GATE: f64 = 0.02;
+/// Mean onset strength below which the input counts as silence.
+const SILENCE_FLUX: f32 = 0.05;
+
+/// What the tracker knows after a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BeatState {
+    /// Tempo in beats per minute (0 until the tracker has locked on).
+    pub tempo_bpm: f64,
+    /// Share of the tempo posterior within ±4 % of `tempo_bpm`, in [0, 1].
+    pub tempo_confidence: f64,
+    /// Position in the current beat, in [0, 1): 0 on the beat.
+    pub beat_phase: f64,
+    /// Frames until the next predicted beat.
+    pub frames_to_next_beat: f64,
+    /// Frames since the beat reported on this frame, when one is (`Some(0.3)`: the beat was 0.3
+    /// frames before this frame's time).
+    pub beat_frames_ago: Option<f64>,
+    /// Whether the tracker currently hears a beat at all (periodic evidence over silence/noise).
+    pub locked: bool,
+}
+
+/// Causal beat tracker over an onset-strength signal.
+pub struct BeatTracker {
+    frame_rate: f64,
+    intervals: Vec<usize>,
+    offsets: Vec<usize>,
+    beat_positions: Vec<usize>,
+    transition: Vec<f64>,
+    fwd: Vec<f64>,
+    next: Vec<f64>,
+    tempo_mass: Vec<f64>,
+    null_beat_share: f64,
+    norm_mean: f32,
+    norm_alpha: f32,
+    evidence: f64,
+    evidence_alpha: f64,
+    last_phase: f64,
+    interval: f64,
+    frames_since_beat: f64,
+    state: BeatState,
+}
+
+impl BeatTracker {
+    /// Builds a tracker for onset strengths arriving at `frame_rate` frames per second.
+    pub fn new(frame_rate: f64) -> Self {
+        let min_iv = (60.0 * frame_rate / MAX_BPM).floor().max(2.0) as usize;
+        let max_iv = (60.0 * frame_rate / MIN_BPM).ceil() as usize;
+        let intervals: Vec<usize> = (min_iv..=max_iv).collect();
+        let mut offsets = Vec::with_capacity(intervals.len());
+        let mut total = 0;
+        for &iv in &intervals {
+            offsets.push(total);
+            total += iv;
+        }
+        let beat_positions: Vec<usize> =
+            intervals.iter().map(|&iv| (iv / OBSERVATION_LAMBDA).max(1)).collect();
+        let n = intervals.len();
+        let mut transition = vec![0.0; n * n];
+        for (j, &from) in intervals.iter().enumerate() {
+            let row = &mut transition[j * n..(j + 1) * n];
+            for (i, &to) in intervals.iter().enumerate() {
+                let ratio = to as f64 / from as f64;
+                row[i] = (-TRANSITION_LAMBDA * (ratio - 1.0).abs()).exp();
+            }
+            let sum: f64 = row.iter().sum();
+            row.iter_mut().for_each(|v| *v /= sum);
+        }
+        let beat_states: usize = beat_positions.iter().sum();
+        let fwd = vec![1.0 / total as f64; total];
+        Self {
+            frame_rate,
+            null_beat_share: beat_states as f64 / total as f64,
+            intervals,
+            offsets,
+            beat_positions,
+            transition,
+            next: vec![0.0; total],
+            fwd,
+            tempo_mass: vec![0.0; n],
+            norm_mean: 0.0,
+            norm_alpha: (1.0 / (NORM_SECONDS * frame_rate)) as f32,
+            evidence: 0.0,
+            evidence_alpha: 1.0 / (EVIDENCE_SECONDS * frame_rate),
+            last_phase: 0.0,
+            interval: 1.0,
+            frames_since_beat: 1e9,
+            state: BeatState::default(),
+        }
+    }
+
+    /// Number of states in the model (its per-frame cost).
+    pub fn num_states(&self) -> usize {
+        self.fwd.len()
+    }
+
+    /// The state after the last frame.
+    pub fn state(&self) -> BeatState {
+        self.state
+    }
+
+    /// Likelihood ratio of "this frame is on a beat" over "it is not", from the onset strength
+    /// relative to its recent mean: above-average frames favour beat states, quiet ones count
+    /// against them, and the ratio is bounded so one huge attack cannot override the tempo.
+    fn beat_likelihood_ratio(&mut self, strength: f32) -> f64 {
+        let s = if strength.is_finite() { strength.max(0.0) } else { 0.0 };
+        self.norm_mean += self.norm_alpha * (s - self.norm_mean);
+        let z = (s / (self.norm_mean + 1e-3)).min(MAX_RELATIVE_STRENGTH) as f64;
+        (OBSERVATION_BETA * (z - 1.0)).exp()
+    }
+
+    /// Consumes one frame's onset strength; returns the updated state.
+    pub fn process(&mut self, strength: f32) -> BeatState {
+        let p_beat = self.beat_likelihood_ratio(strength);
+        let p_other = 1.0;
+        let n = self.intervals.len();
+
+        // Beat boundaries: the last position of every interval feeds position 0 of every interval.
+        for (i, (&iv, &off)) in self.intervals.iter().zip(&self.offsets).enumerate() {
+            self.tempo_mass[i] = self.fwd[off + iv - 1];
+        }
+        for i in 0..n {
+            let mut into = 0.0;
+            for j in 0..n {
+                into += self.tempo_mass[j] * self.transition[j * n + i];
+            }
+            self.next[self.offsets[i]] = into;
+        }
+        for (&iv, &off) in self.intervals.iter().zip(&self.offsets) {
+            self.next[off + 1..off + iv].copy_from_slice(&self.fwd[off..off + iv - 1]);
+        }
+
+        // Observation, normalisation, and the predictive likelihood for the evidence gate.
+        let mut sum = 0.0;
+        for ((&iv, &off), &bp) in self.intervals.iter().zip(&self.offsets).zip(&self.beat_positions) {
+            for (k, v) in self.next[off..off + iv].iter_mut().enumerate() {
+                *v *= if k < bp { p_beat } else { p_other };
+                sum += *v;
+            }
+        }
+        let null = self.null_beat_share * p_beat + (1.0 - self.null_beat_share) * p_other;
+        if sum > 0.0 && sum.is_finite() {
+            let inv = 1.0 / sum;
+            for (f, v) in self.fwd.iter_mut().zip(&self.next) {
+                *f = v * inv;
+            }
+            self.evidence += self.evidence_alpha * ((sum / null).ln() - self.evidence);
+        } else {
+            let u = 1.0 / self.fwd.len() as f64;
+            self.fwd.iter_mut().for_each(|f| *f = u);
+        }
+
+        self.decide()
+    }
+
+    fn decide(&mut self) -> BeatState {
+        let (mut best, mut best_p) = (0, f64::MIN);
+        for (s, &p) in self.fwd.iter().enumerate() {
+            if p > best_p {
+                best_p = p;
+                best = s;
+            }
+        }
+        let ti = match self.offsets.binary_search(&best) {
+            Ok(i) => i,
+            Err(i) => i - 1,
+        };
+        let iv = self.intervals[ti];
+        let pos = best - self.offsets[ti];
+
+        // Tempo: posterior-weighted interval around the best one, for sub-frame resolution.
+        for (i, (&iv_i, &off)) in self.intervals.iter().zip(&self.offsets).enumerate() {
+            self.tempo_mass[i] = self.fwd[off..off + iv_i].iter().sum();
+        }
+        let (mut wsum, mut ivsum, mut near) = (0.0, 0.0, 0.0);
+        for (i, &iv_i) in self.intervals.iter().enumerate() {
+            let ratio = iv_i as f64 / iv as f64;
+            if (ratio - 1.0).abs() <= 0.04 {
+                near += self.tempo_mass[i];
+                wsum += self.tempo_mass[i];
+                ivsum += self.tempo_mass[i] * iv_i as f64;
+            }
+        }
+        let interval = if wsum > 0.0 { ivsum / wsum } else { iv as f64 };
+        // Integer intervals alternate around a fractional tempo; smooth over about a second so the
+        // reported tempo sits between them. A jump larger than the window resets the average.
+        if (self.interval / interval - 1.0).abs() > 0.08 {
+            self.interval = interval;
+        } else {
+            self.interval += (interval - self.interval) / self.frame_rate;
+        }
+        let interval = self.interval;
+        let phase = pos as f64 / iv as f64;
+
+        let locked = self.evidence > EVIDENCE_GATE && self.norm_mean > SILENCE_FLUX;
+        self.frames_since_beat += 1.0;
+        let wrapped = phase < self.last_phase - 0.5;
+        let mut beat_frames_ago = None;
+        if wrapped && self.frames_since_beat >= 0.6 * interval && locked {
+            beat_frames_ago = Some(pos as f64);
+            self.frames_since_beat = pos as f64;
+        }
+        self.last_phase = phase;
+        self.state = BeatState {
+            tempo_bpm: if locked { 60.0 * self.frame_rate / interval } else { 0.0 },
+            tempo_confidence: near.clamp(0.0, 1.0),
+            beat_phase: phase,
+            frames_to_next_beat: (iv - pos) as f64,
+            beat_frames_ago,
+            locked,
+        };
+        self.state
+    }
+
+    /// Periodicity evidence: mean log-likelihood ratio per frame of the beat model over no beat.
+    pub fn evidence(&self) -> f64 {
+        self.evidence
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn click_strengths(bpm: f64, fps: f64, seconds: f64) -> Vec<f32> {
+        let n = (seconds * fps) as usize;
+        let period = 60.0 * fps / bpm;
+        (0..n)
+            .map(|t| {
+                let ph = (t as f64 / period).fract();
+                if ph * period < 1.0 { 5.0 } else { 0.1 }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn locks_onto_a_click_train_tempo_and_phase() {
+        let fps = crate::hop_rate();
+        for bpm in [70.0, 100.0, 128.0, 174.0] {
+            let mut bt = BeatTracker::new(fps);
+            let mut beats = Vec::new();
+            let strengths = click_strengths(bpm, fps, 20.0);
+            for (t, &s) in strengths.iter().enumerate() {
+                let st = bt.process(s);
+                if let Some(ago) = st.beat_frames_ago {
+                    beats.push(t as f64 - ago);
+                }
+            }
+            let st = bt.state();
+            assert!((st.tempo_bpm - bpm).abs() / bpm < 0.02, "bpm {bpm}: got {}", st.tempo_bpm);
+            let period = 60.0 * fps / bpm;
+            let late: Vec<f64> = beats.iter().filter(|&&b| b > 8.0 * fps).copied().collect();
+            assert!(late.len() as f64 >= 11.0 * bpm / 60.0, "bpm {bpm}: {} beats", late.len());
+            for b in late {
+                let off = (b / period).fract().min(1.0 - (b / period).fract()) * period;
+                assert!(off <= 1.5, "bpm {bpm}: beat {b} is {off} frames off the grid");
+            }
+        }
+    }
+
+    #[test]
+    fn silence_and_noise_give_no_beats() {
+        let fps = crate::hop_rate();
+        let mut bt = BeatTracker::new(fps);
+        for _ in 0..(20.0 * fps) as usize {
+            assert!(bt.process(0.0).beat_frames_ago.is_none());
+        }
+        let mut bt = BeatTracker::new(fps);
+        let mut seed = 12345u64;
+        let mut beats = 0;
+        for _ in 0..(30.0 * fps) as usize {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let x = (seed >> 33) as f32 / (1u64 << 31) as f32;
+            if bt.process(x * 3.0).beat_frames_ago.is_some() {
+                beats += 1;
+            }
+        }
+        assert!(beats < 5, "{beats} beats invented from noise");
+    }
+}
