@@ -1,1 +1,9 @@
-//! danced library.
+//! danced: listens to music and makes a character dance to it, live.
+//!
+//! This crate wires the `dsp` analysis to files, commands and (later) the live pipeline.
+
+pub mod bench;
+pub mod decode;
+pub mod offline;
+pub mod output;
+pub mod plot;

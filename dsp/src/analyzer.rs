@@ -1,6 +1,6 @@
 //! The whole streaming analysis chain behind one `process` call per audio block.
 
-use crate::beat::BeatTracker;
+use crate::beat::{BeatTracker, BeatTrackerParams};
 use crate::chroma::ChromaFilterbank;
 use crate::feature::{FeatureFrame, FeatureFramer};
 use crate::mel::{MEL_BANDS, MEL_FMAX, MEL_FMIN, MelFilterbank};
@@ -47,6 +47,8 @@ pub struct AnalyzerConfig {
     pub model_rate: Option<f64>,
     /// Beat and onset tracker.
     pub tracker: BeatTrackerKind,
+    /// Tuning of the native beat tracker.
+    pub beat_params: BeatTrackerParams,
 }
 
 /// Everything known about one analysis hop (11.6 ms). Slices borrow the analyzer's buffers.
@@ -128,12 +130,12 @@ pub trait AnalysisSink {
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct TrackerOutput {
     pub(crate) onset: Option<f64>,
-    beat: Option<f64>,
-    tempo_bpm: f64,
-    tempo_confidence: f64,
-    beat_phase: f64,
-    frames_to_next_beat: f64,
-    locked: bool,
+    pub(crate) beat: Option<f64>,
+    pub(crate) tempo_bpm: f64,
+    pub(crate) tempo_confidence: f64,
+    pub(crate) beat_phase: f64,
+    pub(crate) frames_to_next_beat: f64,
+    pub(crate) locked: bool,
 }
 
 /// Native tracker: SuperFlux peak picking and the beat-pointer HMM.
@@ -190,10 +192,12 @@ impl Analyzer {
         let tracker = match config.tracker {
             BeatTrackerKind::Native => Tracker::Native(Box::new(NativeTracker {
                 picker: OnsetPeakPicker::new(fps),
-                beats: BeatTracker::new(fps),
+                beats: BeatTracker::with_params(fps, config.beat_params),
             })),
             #[cfg(feature = "aubio")]
-            BeatTrackerKind::Aubio => Tracker::Aubio(Box::new(crate::aubio_tracker::AubioTracker::new()?)),
+            BeatTrackerKind::Aubio => {
+                Tracker::Aubio(Box::new(crate::aubio_tracker::AubioTracker::new()?))
+            }
             #[cfg(not(feature = "aubio"))]
             BeatTrackerKind::Aubio => return Err(DspError::TrackerUnavailable("aubio")),
         };
@@ -225,7 +229,8 @@ impl Analyzer {
     /// Feeds one block of interleaved samples; the sink hears everything it completes.
     pub fn process(&mut self, interleaved: &[f32], sink: &mut impl AnalysisSink) {
         let core = &mut self.core;
-        self.resampler.push(interleaved, &mut |mono, now| core.samples(mono, now, sink));
+        self.resampler
+            .push(interleaved, &mut |mono, now| core.samples(mono, now, sink));
     }
 
     /// Latency of the short-window features: half the window plus the resampler delay, seconds.
@@ -302,7 +307,11 @@ impl Core {
 
         let fps = hop_rate();
         if let Some(ago) = out.onset {
-            let e = OnsetEvent { time_s: time_s - ago / fps + EVENT_TIME_OFFSET_S, strength, decided_at_s: now };
+            let e = OnsetEvent {
+                time_s: time_s - ago / fps + EVENT_TIME_OFFSET_S,
+                strength,
+                decided_at_s: now,
+            };
             sink.onset(&e);
         }
         if let Some(ago) = out.beat {

@@ -56,7 +56,10 @@ mod tests {
         let n = 4096;
         let frame: Vec<f32> = (0..n)
             .map(|i| {
-                freqs.iter().map(|f| (2.0 * std::f32::consts::PI * f * i as f32 / 22_050.0).sin()).sum::<f32>()
+                freqs
+                    .iter()
+                    .map(|f| (2.0 * std::f32::consts::PI * f * i as f32 / 22_050.0).sin())
+                    .sum::<f32>()
                     * 0.2
             })
             .collect();
@@ -72,7 +75,13 @@ mod tests {
     fn a440_is_pitch_class_nine() {
         let c = chroma_of(&[440.0]);
         assert_eq!(c[9], 1.0);
-        assert!(c.iter().enumerate().filter(|(i, _)| *i != 9).all(|(_, v)| *v < 0.1), "{c:?}");
+        assert!(
+            c.iter()
+                .enumerate()
+                .filter(|(i, _)| *i != 9)
+                .all(|(_, v)| *v < 0.1),
+            "{c:?}"
+        );
     }
 
     #[test]

@@ -23,4 +23,7 @@ pub enum DspError {
     /// The selected beat tracker is not compiled into this build.
     #[error("beat tracker '{0}' is not available in this build (rebuild with `--features aubio`)")]
     TrackerUnavailable(&'static str),
+    /// The aubio library refused to build one of its objects.
+    #[error("aubio: {0}")]
+    Aubio(String),
 }

@@ -52,7 +52,9 @@ impl FeatureLayout {
     pub fn names() -> Vec<String> {
         let mut v: Vec<String> = (0..MEL_BANDS).map(|i| format!("mel{i:02}")).collect();
         v.extend(["onset", "beat_sin", "beat_cos", "bar_sin", "bar_cos"].map(String::from));
-        const PC: [&str; 12] = ["C", "Db", "D", "Eb", "E", "F", "Gb", "G", "Ab", "A", "Bb", "B"];
+        const PC: [&str; 12] = [
+            "C", "Db", "D", "Eb", "E", "F", "Gb", "G", "Ab", "A", "Bb", "B",
+        ];
         v.extend(PC.iter().map(|p| format!("chroma_{p}")));
         v.extend(["energy_db", "tempo_bpm"].map(String::from));
         v
@@ -88,7 +90,13 @@ pub struct FeatureFramer {
 impl FeatureFramer {
     /// A framer emitting `rate` frames per second (at most one per hop).
     pub fn new(rate: f64) -> Self {
-        Self { rate, next_index: 0, sum: [0.0; FEATURE_DIM], onset_max: 0.0, hops: 0 }
+        Self {
+            rate,
+            next_index: 0,
+            sum: [0.0; FEATURE_DIM],
+            onset_max: 0.0,
+            hops: 0,
+        }
     }
 
     /// The model frame rate in Hz.
@@ -129,7 +137,12 @@ impl FeatureFramer {
         values[FeatureLayout::BAR_SIN] = bar.sin() as f32;
         values[FeatureLayout::BAR_COS] = bar.cos() as f32;
         values[FeatureLayout::TEMPO] = hop.tempo_bpm as f32;
-        let frame = FeatureFrame { index: self.next_index, time_s: frame_time, decided_at_s: hop.decided_at_s, values };
+        let frame = FeatureFrame {
+            index: self.next_index,
+            time_s: frame_time,
+            decided_at_s: hop.decided_at_s,
+            values,
+        };
         self.next_index += 1;
         self.sum = [0.0; FEATURE_DIM];
         self.onset_max = 0.0;

@@ -22,8 +22,10 @@ pub mod onset;
 pub mod resample;
 pub mod stft;
 
-pub use analyzer::{AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, HopFrame, OnsetEvent};
-pub use beat::BeatTracker;
+pub use analyzer::{
+    AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, HopFrame, OnsetEvent,
+};
+pub use beat::{BeatTracker, BeatTrackerParams};
 pub use chroma::ChromaFilterbank;
 pub use error::DspError;
 pub use feature::{FeatureFrame, FeatureFramer, FeatureLayout};

@@ -31,8 +31,9 @@ impl MelFilterbank {
         let bins = fft_len / 2 + 1;
         let bin_hz = sample_rate as f32 / fft_len as f32;
         let (mlo, mhi) = (hz_to_mel(fmin), hz_to_mel(fmax));
-        let edges: Vec<f32> =
-            (0..bands + 2).map(|i| mel_to_hz(mlo + (mhi - mlo) * i as f32 / (bands + 1) as f32)).collect();
+        let edges: Vec<f32> = (0..bands + 2)
+            .map(|i| mel_to_hz(mlo + (mhi - mlo) * i as f32 / (bands + 1) as f32))
+            .collect();
         let mut starts = Vec::with_capacity(bands);
         let mut weights = Vec::with_capacity(bands);
         for b in 0..bands {
@@ -42,7 +43,11 @@ impl MelFilterbank {
             let last = ((hi / bin_hz).ceil() as usize).min(bins - 1);
             for k in first..=last {
                 let f = k as f32 * bin_hz;
-                let v = if f <= c { (f - lo) / (c - lo) } else { (hi - f) / (hi - c) };
+                let v = if f <= c {
+                    (f - lo) / (c - lo)
+                } else {
+                    (hi - f) / (hi - c)
+                };
                 w.push(v.clamp(0.0, 1.0));
             }
             if w.iter().all(|&v| v == 0.0) {
@@ -52,7 +57,11 @@ impl MelFilterbank {
             starts.push(first);
             weights.push(w);
         }
-        Self { starts, weights, band_hz: edges[1..=bands].to_vec() }
+        Self {
+            starts,
+            weights,
+            band_hz: edges[1..=bands].to_vec(),
+        }
     }
 
     /// Number of bands.
@@ -85,7 +94,12 @@ mod tests {
         spec[bin] = 1.0;
         let mut out = vec![0.0; MEL_BANDS];
         fb.apply(&spec, &mut out);
-        let best = out.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap().0;
+        let best = out
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .unwrap()
+            .0;
         let centre = fb.centres_hz()[best];
         assert!((centre - 1000.0).abs() < 100.0, "band centre {centre}");
         assert!(out.iter().all(|v| v.is_finite()));

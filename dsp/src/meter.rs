@@ -150,7 +150,11 @@ fn cosine_distance(a: &[f32; 12], b: &[f32; 12]) -> f32 {
     let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
     let na: f32 = a.iter().map(|x| x * x).sum::<f32>().sqrt();
     let nb: f32 = b.iter().map(|x| x * x).sum::<f32>().sqrt();
-    if na < 1e-6 || nb < 1e-6 { 0.0 } else { 1.0 - dot / (na * nb) }
+    if na < 1e-6 || nb < 1e-6 {
+        0.0
+    } else {
+        1.0 - dot / (na * nb)
+    }
 }
 
 #[cfg(test)]
@@ -170,7 +174,11 @@ mod tests {
         let mut out = Vec::new();
         for beat in 0..64usize {
             let is_down = (beat + meter - downbeat_offset) % meter == 0;
-            let span_chord = if beat == 0 { [0.0; 12] } else { chords[bar_of(beat - 1) % 3] };
+            let span_chord = if beat == 0 {
+                [0.0; 12]
+            } else {
+                chords[bar_of(beat - 1) % 3]
+            };
             for f in 0..40 {
                 let bass = if is_down && f == 39 { 3.0 } else { 0.2 };
                 mt.frame(&span_chord, bass);
@@ -189,7 +197,10 @@ mod tests {
                     assert_eq!(per_bar, meter, "meter {meter} offset {offset}");
                     // Beat index `beat` was counted as beat number beat+1 by the tracker.
                     let expected = (beat + meter - offset) % meter + 1;
-                    assert_eq!(in_bar, expected, "meter {meter} offset {offset} beat {beat}");
+                    assert_eq!(
+                        in_bar, expected,
+                        "meter {meter} offset {offset} beat {beat}"
+                    );
                 }
             }
         }

@@ -26,7 +26,11 @@ impl OnsetDetector {
     /// Builds a detector for magnitude spectra of an FFT of `fft_len` samples at `sample_rate`.
     pub fn new(fft_len: usize, sample_rate: u32) -> Self {
         let filterbank = MelFilterbank::new(FLUX_BANDS, 30.0, 11_000.0, fft_len, sample_rate);
-        let low_bands = filterbank.centres_hz().iter().take_while(|&&c| c <= LOW_BAND_HZ).count();
+        let low_bands = filterbank
+            .centres_hz()
+            .iter()
+            .take_while(|&&c| c <= LOW_BAND_HZ)
+            .count();
         Self {
             filterbank,
             bands: vec![0.0; FLUX_BANDS],
@@ -50,7 +54,9 @@ impl OnsetDetector {
             for b in 0..n {
                 let lo = b.saturating_sub(1);
                 let hi = (b + 1).min(n - 1);
-                let reference = self.previous[lo..=hi].iter().fold(f32::MIN, |m, &v| m.max(v));
+                let reference = self.previous[lo..=hi]
+                    .iter()
+                    .fold(f32::MIN, |m, &v| m.max(v));
                 let d = (self.bands[b] - reference).max(0.0);
                 flux += d;
                 if b < self.low_bands {
@@ -116,7 +122,8 @@ impl OnsetPeakPicker {
         let mean = (1..=self.pre_avg).map(at).sum::<f32>() / self.pre_avg as f32;
         // Slowly-decaying level of the strength so thresholds follow loudness; the absolute floor
         // keeps noise in near-silence from firing.
-        self.level = self.level.max(strength) * self.level_decay + strength * (1.0 - self.level_decay);
+        self.level =
+            self.level.max(strength) * self.level_decay + strength * (1.0 - self.level_decay);
         let threshold = mean + (0.12 * self.level).max(0.5);
         self.pos = (self.pos + 1) % n;
         self.since_last = self.since_last.saturating_add(1);

@@ -41,7 +41,10 @@ impl StreamResampler {
                 1,
                 FixedSync::Input,
             )
-            .map_err(|e| DspError::Resampler { from: input_rate, reason: e.to_string() })?;
+            .map_err(|e| DspError::Resampler {
+                from: input_rate,
+                reason: e.to_string(),
+            })?;
             let chunk_len = r.input_frames_max();
             let out_len = r.output_frames_max();
             (Some(r), chunk_len, out_len)
@@ -147,12 +150,19 @@ mod tests {
     fn resamples_48k_stereo_sine_to_analysis_rate() {
         let (out, delay) = run(48_000, 2, 2.0, 440.0);
         let expected = 2.0 * ANALYSIS_RATE as f64;
-        assert!((out.len() as f64 - expected).abs() < 2000.0, "len {}", out.len());
+        assert!(
+            (out.len() as f64 - expected).abs() < 2000.0,
+            "len {}",
+            out.len()
+        );
         // Amplitude and frequency survive: count zero crossings in the steady part.
         let steady = &out[delay + 2000..out.len() - 2000];
         let peak = steady.iter().fold(0.0f32, |m, x| m.max(x.abs()));
         assert!((peak - 0.5).abs() < 0.02, "peak {peak}");
-        let crossings = steady.windows(2).filter(|w| w[0] < 0.0 && w[1] >= 0.0).count();
+        let crossings = steady
+            .windows(2)
+            .filter(|w| w[0] < 0.0 && w[1] >= 0.0)
+            .count();
         let secs = steady.len() as f64 / ANALYSIS_RATE as f64;
         assert!((crossings as f64 / secs - 440.0).abs() < 3.0);
     }
@@ -160,7 +170,9 @@ mod tests {
     #[test]
     fn passes_through_at_analysis_rate_and_downmixes() {
         let mut r = StreamResampler::new(ANALYSIS_RATE, 2).unwrap();
-        let input: Vec<f32> = (0..2048).flat_map(|i| [i as f32, -(i as f32) + 1.0]).collect();
+        let input: Vec<f32> = (0..2048)
+            .flat_map(|i| [i as f32, -(i as f32) + 1.0])
+            .collect();
         let mut out = Vec::new();
         r.push(&input, &mut |s, _| out.extend_from_slice(s));
         assert_eq!(out.len(), 2048);
@@ -179,7 +191,13 @@ mod tests {
 
     #[test]
     fn rejects_bad_configuration() {
-        assert!(matches!(StreamResampler::new(1000, 1), Err(DspError::SampleRate(1000))));
-        assert!(matches!(StreamResampler::new(44_100, 0), Err(DspError::NoChannels)));
+        assert!(matches!(
+            StreamResampler::new(1000, 1),
+            Err(DspError::SampleRate(1000))
+        ));
+        assert!(matches!(
+            StreamResampler::new(44_100, 0),
+            Err(DspError::NoChannels)
+        ));
     }
 }

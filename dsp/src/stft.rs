@@ -52,7 +52,8 @@ impl Stft {
         for ((b, &x), &w) in self.buf.iter_mut().zip(frame).zip(&self.window) {
             *b = Complex32::new(x * w, 0.0);
         }
-        self.fft.process_with_scratch(&mut self.buf, &mut self.scratch);
+        self.fft
+            .process_with_scratch(&mut self.buf, &mut self.scratch);
         for (o, c) in out.iter_mut().zip(&self.buf) {
             *o = c.norm() * self.scale;
         }
@@ -73,10 +74,11 @@ mod tests {
             .collect();
         let mut mag = vec![0.0; stft.bins()];
         stft.magnitude(&frame, &mut mag);
-        let (argmax, peak) = mag
-            .iter()
-            .enumerate()
-            .fold((0, 0.0f32), |(bi, bm), (i, &m)| if m > bm { (i, m) } else { (bi, bm) });
+        let (argmax, peak) =
+            mag.iter().enumerate().fold(
+                (0, 0.0f32),
+                |(bi, bm), (i, &m)| if m > bm { (i, m) } else { (bi, bm) },
+            );
         assert_eq!(argmax, 37);
         assert!((peak - 1.0).abs() < 0.01, "peak {peak}");
         assert!(mag[60] < 1e-3);

@@ -1,0 +1,312 @@
+//! `danced bench beats`: the native and aubio trackers side by side on three annotated sets.
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use dsp::BeatTrackerKind;
+use dsp::metrics::{self, BEAT_TOLERANCE_S, ONSET_TOLERANCE_S};
+
+use crate::offline::{AnalyzeOptions, FileAnalysis, analyze_file};
+use crate::output::read_times;
+
+/// A beat counts only if the tracker committed to it no later than this after it happened.
+pub const MAX_DECISION_LAG_S: f64 = 0.05;
+/// tang2018 music frames per second (for `config.json` spans).
+const TANG_FPS: f64 = 25.0;
+
+/// One annotated recording.
+#[derive(Clone, Debug)]
+pub struct BenchItem {
+    /// Short name for tables.
+    pub name: String,
+    /// The audio file.
+    pub audio: PathBuf,
+    /// Reference beat times, seconds.
+    pub beats: Vec<f64>,
+    /// Span scored, seconds (times are shifted to start at its beginning).
+    pub span: Option<(f64, f64)>,
+    /// Reference onset times, if annotated.
+    pub onsets: Option<Vec<f64>>,
+}
+
+/// A named list of recordings.
+#[derive(Clone, Debug)]
+pub struct BenchSet {
+    /// Name in the table.
+    pub name: &'static str,
+    /// Its recordings.
+    pub items: Vec<BenchItem>,
+}
+
+/// Scores of one tracker on one recording.
+#[derive(Clone, Debug, Default)]
+pub struct ItemScore {
+    /// Recording name.
+    pub name: String,
+    /// Beat F-measure over beats decided in time.
+    pub f_measure: f64,
+    /// CMLt over the same beats.
+    pub cmlt: f64,
+    /// AMLt over the same beats.
+    pub amlt: f64,
+    /// Onset F-measure, where onsets are annotated.
+    pub onset_f: Option<f64>,
+    /// Beats dropped for being decided too late.
+    pub late_beats: usize,
+    /// Beats emitted.
+    pub beats: usize,
+    /// Median decision lag of the beats, seconds.
+    pub median_lag_s: f64,
+    /// Median reported tempo, BPM.
+    pub tempo_bpm: f64,
+    /// Audio seconds.
+    pub duration_s: f64,
+    /// Analyzer seconds.
+    pub analysis_s: f64,
+    /// Error text if the file failed.
+    pub error: Option<String>,
+}
+
+fn sorted_dir(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = fs::read_dir(dir)
+        .map(|r| r.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+/// The rendered songs with exact beats in `data/synth-beats`.
+pub fn synth_set(data: &Path) -> BenchSet {
+    let mut items = Vec::new();
+    for p in sorted_dir(&data.join("synth-beats")) {
+        if p.extension().is_some_and(|e| e == "flac")
+            && let Ok(beats) = read_times(&p.with_extension("beats"))
+        {
+            let name = p
+                .file_stem()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned();
+            items.push(BenchItem {
+                name,
+                audio: p,
+                beats,
+                span: None,
+                onsets: None,
+            });
+        }
+    }
+    BenchSet {
+        name: "synth-beats",
+        items,
+    }
+}
+
+fn json_number(text: &str, key: &str) -> Option<f64> {
+    let at = text.find(&format!("\"{key}\""))?;
+    let rest = text[at + key.len() + 2..]
+        .trim_start()
+        .strip_prefix(':')?
+        .trim_start();
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
+/// The tang2018 songs against the offline reference beats, scored within each danced span.
+pub fn tang_set(data: &Path) -> BenchSet {
+    let mut items = Vec::new();
+    for dir in sorted_dir(&data.join("tang2018")) {
+        let name = dir
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
+        let audio = dir.join("audio.mp3");
+        let reference = data.join("tang2018-beats").join(format!("{name}.beats"));
+        let (Ok(beats), true) = (read_times(&reference), audio.exists()) else {
+            continue;
+        };
+        let span = fs::read_to_string(dir.join("config.json"))
+            .ok()
+            .and_then(|t| {
+                Some((
+                    json_number(&t, "start_position")? / TANG_FPS,
+                    json_number(&t, "end_position")? / TANG_FPS,
+                ))
+            });
+        items.push(BenchItem {
+            name,
+            audio,
+            beats,
+            span,
+            onsets: None,
+        });
+    }
+    BenchSet {
+        name: "tang2018",
+        items,
+    }
+}
+
+/// The hand-annotated madmom test recording (beats and onsets).
+pub fn madmom_set(data: &Path) -> BenchSet {
+    let dir = data.join("madmom-tests");
+    let mut items = Vec::new();
+    if let Ok(beats) = read_times(&dir.join("sample.beats")) {
+        items.push(BenchItem {
+            name: "sample".into(),
+            audio: dir.join("sample.wav"),
+            beats,
+            span: None,
+            onsets: read_times(&dir.join("sample.onsets")).ok(),
+        });
+    }
+    BenchSet {
+        name: "madmom-tests",
+        items,
+    }
+}
+
+fn in_span(times: &[f64], span: Option<(f64, f64)>) -> Vec<f64> {
+    match span {
+        None => times.to_vec(),
+        Some((a, b)) => times
+            .iter()
+            .filter(|&&t| t >= a && t <= b)
+            .map(|t| t - a)
+            .collect(),
+    }
+}
+
+/// Scores one analysis against one item.
+pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
+    let timely: Vec<f64> = analysis
+        .beats
+        .iter()
+        .filter(|b| b.decided_at_s - b.time_s <= MAX_DECISION_LAG_S)
+        .map(|b| b.time_s)
+        .collect();
+    let mut lags: Vec<f64> = analysis
+        .beats
+        .iter()
+        .map(|b| b.decided_at_s - b.time_s)
+        .collect();
+    lags.sort_by(f64::total_cmp);
+    let reference = in_span(&item.beats, item.span);
+    let estimated = in_span(&timely, item.span);
+    let s = metrics::evaluate_beats(&reference, &estimated);
+    let _ = BEAT_TOLERANCE_S;
+    let onset_f = item.onsets.as_ref().map(|r| {
+        let est: Vec<f64> = analysis.onsets.iter().map(|o| o.time_s).collect();
+        metrics::onset_f_measure(r, &est, ONSET_TOLERANCE_S).f_measure
+    });
+    ItemScore {
+        name: item.name.clone(),
+        f_measure: s.f_measure,
+        cmlt: s.cmlt,
+        amlt: s.amlt,
+        onset_f,
+        late_beats: analysis.beats.len() - timely.len(),
+        beats: analysis.beats.len(),
+        median_lag_s: lags.get(lags.len() / 2).copied().unwrap_or(0.0),
+        tempo_bpm: analysis.median_tempo(),
+        duration_s: analysis.duration_s,
+        analysis_s: analysis.analysis_time.as_secs_f64(),
+        error: None,
+    }
+}
+
+/// Runs one tracker over a set with `jobs` worker threads (each analysis runs on one thread).
+pub fn run_set(
+    set: &BenchSet,
+    tracker: BeatTrackerKind,
+    beat_params: dsp::beat::BeatTrackerParams,
+    jobs: usize,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Vec<ItemScore> {
+    let next = Mutex::new(0usize);
+    let results = Mutex::new(vec![ItemScore::default(); set.items.len()]);
+    std::thread::scope(|s| {
+        for _ in 0..jobs.max(1) {
+            s.spawn(|| {
+                loop {
+                    let i = {
+                        let mut n = next.lock().unwrap_or_else(|e| e.into_inner());
+                        let i = *n;
+                        *n += 1;
+                        i
+                    };
+                    let Some(item) = set.items.get(i) else { break };
+                    let opts = AnalyzeOptions {
+                        tracker,
+                        model_rate: None,
+                        keep_hops: false,
+                        beat_params,
+                    };
+                    let r = match analyze_file(&item.audio, opts, &mut |_, _| {}) {
+                        Ok(a) => score(item, &a),
+                        Err(e) => ItemScore {
+                            name: item.name.clone(),
+                            error: Some(e.to_string()),
+                            ..Default::default()
+                        },
+                    };
+                    progress(&item.name);
+                    results.lock().unwrap_or_else(|e| e.into_inner())[i] = r;
+                }
+            });
+        }
+    });
+    results.into_inner().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Mean of a field over the scores that did not fail.
+pub fn mean(scores: &[ItemScore], f: impl Fn(&ItemScore) -> f64) -> f64 {
+    let ok: Vec<f64> = scores.iter().filter(|s| s.error.is_none()).map(f).collect();
+    if ok.is_empty() {
+        0.0
+    } else {
+        ok.iter().sum::<f64>() / ok.len() as f64
+    }
+}
+
+/// Audio seconds per analyzer second over the scores.
+pub fn speed(scores: &[ItemScore]) -> f64 {
+    let a: f64 = scores.iter().map(|s| s.analysis_s).sum();
+    let d: f64 = scores.iter().map(|s| s.duration_s).sum();
+    d / a.max(1e-9)
+}
+
+/// A per-file table of one tracker on one set.
+pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScore]) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "\n{} — {}", set.name, tracker.name());
+    let _ = writeln!(
+        out,
+        "| file | F | CMLt | AMLt | tempo | beats | late | lag p50 ms |"
+    );
+    let _ = writeln!(out, "| --- | --- | --- | --- | --- | --- | --- | --- |");
+    for s in scores {
+        if let Some(e) = &s.error {
+            let _ = writeln!(out, "| {} | error: {e} |", s.name);
+            continue;
+        }
+        let _ = writeln!(
+            out,
+            "| {} | {:.3} | {:.3} | {:.3} | {:.1} | {} | {} | {:.0} |",
+            s.name,
+            s.f_measure,
+            s.cmlt,
+            s.amlt,
+            s.tempo_bpm,
+            s.beats,
+            s.late_beats,
+            s.median_lag_s * 1000.0
+        );
+    }
+    out
+}

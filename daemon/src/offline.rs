@@ -1,0 +1,206 @@
+//! Offline analysis of a file through the same streaming code the live daemon runs.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use dsp::{
+    AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, FeatureFrame, HopFrame,
+    OnsetEvent,
+};
+
+use crate::decode::{AudioFileReader, DecodeError};
+
+/// Frames handed to the analyzer per call, as a sound card would (256 frames ≈ 5.8 ms at 44.1 kHz).
+pub const BLOCK_FRAMES: usize = 256;
+
+/// What one analysis hop looked like, kept for plots and summaries.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HopSummary {
+    /// Audio time, seconds.
+    pub time_s: f64,
+    /// Onset strength.
+    pub onset_strength: f32,
+    /// Tempo in BPM (0 when no beat is heard).
+    pub tempo_bpm: f64,
+    /// Beat phase in [0, 1).
+    pub beat_phase: f64,
+    /// Bar phase in [0, 1).
+    pub bar_phase: f64,
+    /// RMS energy in dBFS.
+    pub energy_db: f32,
+}
+
+/// Everything `danced analyze` learns about a file.
+#[derive(Debug, Default)]
+pub struct FileAnalysis {
+    /// Beats in order.
+    pub beats: Vec<BeatEvent>,
+    /// Onsets in order.
+    pub onsets: Vec<OnsetEvent>,
+    /// Feature frames at the model rate (empty when none were asked for).
+    pub features: Vec<FeatureFrame>,
+    /// Per-hop summaries (empty unless asked for).
+    pub hops: Vec<HopSummary>,
+    /// Length of the audio, seconds.
+    pub duration_s: f64,
+    /// Input sample rate, Hz.
+    pub sample_rate: u32,
+    /// Input channels.
+    pub channels: u16,
+    /// Time spent decoding.
+    pub decode_time: Duration,
+    /// Time spent in the analyzer.
+    pub analysis_time: Duration,
+    /// Packets the decoder had to skip.
+    pub skipped_packets: usize,
+}
+
+impl FileAnalysis {
+    /// Median tempo over the beats, BPM (0 without beats).
+    pub fn median_tempo(&self) -> f64 {
+        let mut t: Vec<f64> = self
+            .beats
+            .iter()
+            .map(|b| b.tempo_bpm)
+            .filter(|t| *t > 0.0)
+            .collect();
+        if t.is_empty() {
+            return 0.0;
+        }
+        t.sort_by(f64::total_cmp);
+        t[t.len() / 2]
+    }
+
+    /// Analysis speed as a multiple of real time (analyzer only, decoding excluded).
+    pub fn realtime_factor(&self) -> f64 {
+        self.duration_s / self.analysis_time.as_secs_f64().max(1e-9)
+    }
+}
+
+/// Options for [`analyze_file`].
+#[derive(Clone, Copy, Debug)]
+pub struct AnalyzeOptions {
+    /// Beat tracker.
+    pub tracker: BeatTrackerKind,
+    /// Model frame rate for features, Hz (`None`: no features).
+    pub model_rate: Option<f64>,
+    /// Keep per-hop summaries (for plots).
+    pub keep_hops: bool,
+    /// Tuning of the native beat tracker.
+    pub beat_params: dsp::beat::BeatTrackerParams,
+}
+
+/// Why a file could not be analysed.
+#[derive(Debug, thiserror::Error)]
+pub enum AnalyzeError {
+    /// The file could not be decoded.
+    #[error(transparent)]
+    Decode(#[from] DecodeError),
+    /// The analysis chain refused the file's format.
+    #[error("{path}: {source}")]
+    Dsp {
+        /// The file.
+        path: String,
+        /// What the analyzer said.
+        source: dsp::DspError,
+    },
+}
+
+struct Collector<'a> {
+    result: &'a mut FileAnalysis,
+    keep_hops: bool,
+}
+
+impl AnalysisSink for Collector<'_> {
+    fn hop(&mut self, hop: &HopFrame) {
+        if self.keep_hops {
+            self.result.hops.push(HopSummary {
+                time_s: hop.time_s,
+                onset_strength: hop.onset_strength,
+                tempo_bpm: hop.tempo_bpm,
+                beat_phase: hop.beat_phase,
+                bar_phase: hop.bar_phase,
+                energy_db: hop.energy_db,
+            });
+        }
+    }
+    fn onset(&mut self, onset: &OnsetEvent) {
+        self.result.onsets.push(*onset);
+    }
+    fn beat(&mut self, beat: &BeatEvent) {
+        self.result.beats.push(*beat);
+    }
+    fn feature(&mut self, frame: &FeatureFrame) {
+        self.result.features.push(*frame);
+    }
+}
+
+/// Decodes `path` packet by packet and streams it through the analyzer in [`BLOCK_FRAMES`]
+/// blocks; `progress` hears the seconds of audio done so far.
+pub fn analyze_file(
+    path: &Path,
+    options: AnalyzeOptions,
+    progress: &mut dyn FnMut(f64, Option<f64>),
+) -> Result<FileAnalysis, AnalyzeError> {
+    let decode_start = Instant::now();
+    let mut reader = AudioFileReader::open(path)?;
+    let mut decode_time = decode_start.elapsed();
+    let (rate, channels) = (reader.sample_rate(), reader.channels());
+    let total_s = reader.total_frames().map(|f| f as f64 / rate as f64);
+    let mut analyzer = Analyzer::new(AnalyzerConfig {
+        sample_rate: rate,
+        channels,
+        model_rate: options.model_rate,
+        tracker: options.tracker,
+        beat_params: options.beat_params,
+    })
+    .map_err(|source| AnalyzeError::Dsp {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let mut result = FileAnalysis {
+        sample_rate: rate,
+        channels,
+        ..Default::default()
+    };
+    let mut analysis_time = Duration::ZERO;
+    let mut packet = Vec::new();
+    let mut frames_total = 0u64;
+    let block = BLOCK_FRAMES * channels as usize;
+    let mut last_report = 0.0;
+    loop {
+        let t = Instant::now();
+        let n = reader.read_block(&mut packet)?;
+        decode_time += t.elapsed();
+        if n == 0 {
+            break;
+        }
+        frames_total += n as u64;
+        let t = Instant::now();
+        let mut sink = Collector {
+            result: &mut result,
+            keep_hops: options.keep_hops,
+        };
+        for chunk in packet[..n * channels as usize].chunks(block) {
+            analyzer.process(chunk, &mut sink);
+        }
+        analysis_time += t.elapsed();
+        let done = frames_total as f64 / rate as f64;
+        if done - last_report >= 1.0 {
+            progress(done, total_s);
+            last_report = done;
+        }
+    }
+    if frames_total == 0 {
+        return Err(DecodeError::Empty {
+            path: path.to_path_buf(),
+        }
+        .into());
+    }
+    result.duration_s = frames_total as f64 / rate as f64;
+    result.decode_time = decode_time;
+    result.analysis_time = analysis_time;
+    result.skipped_packets = reader.skipped_packets();
+    progress(result.duration_s, total_s);
+    Ok(result)
+}
