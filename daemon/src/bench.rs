@@ -29,6 +29,8 @@ pub struct BenchItem {
     pub span: Option<(f64, f64)>,
     /// Reference onset times, if annotated.
     pub onsets: Option<Vec<f64>>,
+    /// Seconds at the start left unscored (mir_eval skips 5 s; a clip shorter than that can't).
+    pub skip_s: f64,
 }
 
 /// A named list of recordings.
@@ -95,6 +97,7 @@ pub fn synth_set(data: &Path) -> BenchSet {
                 beats,
                 span: None,
                 onsets: None,
+                skip_s: metrics::MIN_BEAT_TIME_S,
             });
         }
     }
@@ -144,6 +147,7 @@ pub fn tang_set(data: &Path) -> BenchSet {
             beats,
             span,
             onsets: None,
+            skip_s: metrics::MIN_BEAT_TIME_S,
         });
     }
     BenchSet {
@@ -163,6 +167,7 @@ pub fn madmom_set(data: &Path) -> BenchSet {
             beats,
             span: None,
             onsets: read_times(&dir.join("sample.onsets")).ok(),
+            skip_s: 0.0,
         });
     }
     BenchSet {
@@ -198,17 +203,19 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
     lags.sort_by(f64::total_cmp);
     let reference = in_span(&item.beats, item.span);
     let estimated = in_span(&timely, item.span);
-    let s = metrics::evaluate_beats(&reference, &estimated);
-    let _ = BEAT_TOLERANCE_S;
+    let reference = metrics::trim_beats(&reference, item.skip_s);
+    let estimated = metrics::trim_beats(&estimated, item.skip_s);
+    let f_measure = metrics::beat_f_measure(&reference, &estimated, BEAT_TOLERANCE_S);
+    let c = metrics::continuity(&reference, &estimated);
     let onset_f = item.onsets.as_ref().map(|r| {
         let est: Vec<f64> = analysis.onsets.iter().map(|o| o.time_s).collect();
         metrics::onset_f_measure(r, &est, ONSET_TOLERANCE_S).f_measure
     });
     ItemScore {
         name: item.name.clone(),
-        f_measure: s.f_measure,
-        cmlt: s.cmlt,
-        amlt: s.amlt,
+        f_measure,
+        cmlt: c.cmlt,
+        amlt: c.amlt,
         onset_f,
         late_beats: analysis.beats.len() - timely.len(),
         beats: analysis.beats.len(),

@@ -14,7 +14,7 @@ use crate::{ANALYSIS_RATE, DspError, HOP, LONG_WINDOW, SHORT_WINDOW, hop_rate};
 ///
 /// A log-compressed flux rises as soon as an attack enters the newest part of the window, so the
 /// detection frame's centre lies after the attack; measured on click tracks (see the tests).
-pub const EVENT_TIME_OFFSET_S: f64 = -0.012;
+pub const EVENT_TIME_OFFSET_S: f64 = 0.016;
 
 /// Which beat and onset tracker drives the events and phases.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -279,7 +279,7 @@ impl Core {
         for v in self.mel_db.iter_mut() {
             *v = (10.0 * (*v + 1e-12).log10()).max(-120.0);
         }
-        if self.hop_index % 2 == 0 {
+        if self.hop_index.is_multiple_of(2) {
             self.long.magnitude(&self.history, &mut self.long_mag);
             self.chroma_fb.apply(&self.long_mag, &mut self.chroma);
         }
@@ -290,7 +290,7 @@ impl Core {
         let out = match &mut self.tracker {
             Tracker::Native(n) => {
                 let onset = n.picker.process(strength).then_some(0.0);
-                let st = n.beats.process(strength);
+                let st = n.beats.process(strength, bass);
                 TrackerOutput {
                     onset,
                     beat: st.beat_frames_ago,

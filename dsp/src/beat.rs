@@ -12,6 +12,10 @@ pub const MIN_BPM: f64 = 55.0;
 pub const MAX_BPM: f64 = 215.0;
 /// One beat state per this many positions of a beat expects an onset.
 const OBSERVATION_LAMBDA: usize = 16;
+/// Seconds of continuous evidence before beats are reported.
+const LOCK_SECONDS: f64 = 1.5;
+/// Once locked, the gates drop to this fraction of their values.
+const UNLOCK_FACTOR: f32 = 0.75;
 /// Mean onset strength below which the input counts as silence.
 const SILENCE_FLUX: f32 = 0.05;
 
@@ -34,8 +38,13 @@ pub struct BeatTrackerParams {
     /// Minimum onset contrast (mean absolute deviation over mean) for beats to be reported;
     /// stationary noise stays well below it.
     pub contrast_gate: f32,
+    /// Minimum mean relative onset strength on the tracked beats for beats to be reported: music
+    /// puts its strongest onsets on the beat, noise does not.
+    pub salience_gate: f32,
     /// Beats are reported this many frames before they are due (compensates analysis delay).
     pub lead_frames: usize,
+    /// Extra weight of bass-band onsets (kick drums, bass notes) in the beat observation.
+    pub bass_weight: f32,
 }
 
 impl Default for BeatTrackerParams {
@@ -43,12 +52,14 @@ impl Default for BeatTrackerParams {
         Self {
             transition_lambda: 100.0,
             observation_beta: 1.0,
-            max_relative_strength: 8.0,
+            max_relative_strength: 30.0,
             norm_seconds: 3.0,
             prior_bpm: 120.0,
             prior_octaves: 1.0,
-            contrast_gate: 0.35,
-            lead_frames: 1,
+            contrast_gate: 0.32,
+            salience_gate: 1.5,
+            lead_frames: 0,
+            bass_weight: 6.0,
         }
     }
 }
@@ -73,7 +84,9 @@ impl BeatTrackerParams {
                 "prior_bpm" => self.prior_bpm = x,
                 "prior_octaves" => self.prior_octaves = x,
                 "contrast_gate" => self.contrast_gate = x as f32,
+                "salience_gate" => self.salience_gate = x as f32,
                 "lead_frames" => self.lead_frames = x as usize,
+                "bass_weight" => self.bass_weight = x as f32,
                 other => return Err(format!("unknown beat tracker parameter {other:?}")),
             }
         }
@@ -110,7 +123,13 @@ pub struct BeatTracker {
     next: Vec<f64>,
     tempo_mass: Vec<f64>,
     norm_mean: f32,
+    full_mean: f32,
     contrast: f32,
+    recent_z: [f32; 3],
+    salience: f32,
+    salience_pending: bool,
+    locked: bool,
+    evident_frames: u32,
     params: BeatTrackerParams,
     norm_alpha: f32,
     last_phase: f64,
@@ -169,7 +188,13 @@ impl BeatTracker {
             fwd,
             tempo_mass: vec![0.0; n],
             norm_mean: 0.0,
+            full_mean: 0.0,
             contrast: 0.0,
+            recent_z: [0.0; 3],
+            salience: 0.0,
+            salience_pending: false,
+            locked: false,
+            evident_frames: 0,
             params,
             norm_alpha: (1.0 / (params.norm_seconds * frame_rate)) as f32,
             last_phase: 0.0,
@@ -192,21 +217,26 @@ impl BeatTracker {
     /// Likelihood ratio of "this frame is on a beat" over "it is not", from the onset strength
     /// relative to its recent mean: above-average frames favour beat states, quiet ones count
     /// against them, and the ratio is bounded so one huge attack cannot override the tempo.
-    fn beat_likelihood_ratio(&mut self, strength: f32) -> f64 {
-        let s = if strength.is_finite() {
-            strength.max(0.0)
-        } else {
-            0.0
-        };
+    fn beat_likelihood_ratio(&mut self, strength: f32, bass_strength: f32) -> f64 {
+        let clean = |x: f32| if x.is_finite() { x.max(0.0) } else { 0.0 };
+        let (full, bass) = (clean(strength), clean(bass_strength));
+        // The gate looks at the full-band flux alone: summed over many bands it is nearly
+        // constant for stationary noise, while the few bass bins fluctuate even then.
+        // The mean rises fast so that sound arriving after silence is not one long "attack".
+        let rise = if full > self.full_mean { 12.0 } else { 1.0 };
+        self.full_mean += (rise * self.norm_alpha).min(1.0) * (full - self.full_mean);
+        let zf = full / (self.full_mean + 1e-3);
+        self.contrast += self.norm_alpha * ((zf - 1.0).abs().min(4.0) - self.contrast);
+        let s = full + self.params.bass_weight * bass;
         self.norm_mean += self.norm_alpha * (s - self.norm_mean);
         let z = (s / (self.norm_mean + 1e-3)).min(self.params.max_relative_strength);
-        self.contrast += self.norm_alpha * ((z - 1.0).abs() - self.contrast);
+        self.recent_z = [self.recent_z[1], self.recent_z[2], z];
         (self.params.observation_beta * (z as f64 - 1.0)).exp()
     }
 
-    /// Consumes one frame's onset strength; returns the updated state.
-    pub fn process(&mut self, strength: f32) -> BeatState {
-        let p_beat = self.beat_likelihood_ratio(strength);
+    /// Consumes one frame's onset strength (all bands and bass bands); returns the updated state.
+    pub fn process(&mut self, strength: f32, bass_strength: f32) -> BeatState {
+        let p_beat = self.beat_likelihood_ratio(strength, bass_strength);
         let p_other = 1.0;
         let n = self.intervals.len();
 
@@ -290,7 +320,6 @@ impl BeatTracker {
         let interval = self.interval;
         let phase = pos as f64 / iv as f64;
 
-        let locked = self.contrast > self.params.contrast_gate && self.norm_mean > SILENCE_FLUX;
         self.frames_since_beat += 1.0;
         // The beat is reported `lead_frames` before it is due: the position counter is exact
         // between tempo changes, and reporting early cancels part of the analysis delay.
@@ -298,7 +327,27 @@ impl BeatTracker {
         let shifted = ((pos + lead) % iv) as f64 / iv as f64;
         let wrapped = shifted < self.last_phase - 0.5;
         let mut beat_frames_ago = None;
-        if wrapped && self.frames_since_beat >= 0.6 * interval && locked {
+        let beat_due = wrapped && self.frames_since_beat >= 0.6 * interval;
+        // The beat's salience is read one frame after it, so the frames on both sides count.
+        if self.salience_pending {
+            let z = self.recent_z.iter().fold(0.0f32, |m, &v| m.max(v));
+            self.salience += 0.25 * (z - self.salience);
+        }
+        self.salience_pending = beat_due;
+        // Hysteresis: locking needs clear evidence, a brief dip (a break, a soft bar) keeps it.
+        let hold = if self.locked { UNLOCK_FACTOR } else { 1.0 };
+        let evident = self.contrast > hold * self.params.contrast_gate
+            && self.salience > hold * self.params.salience_gate
+            && self.full_mean > SILENCE_FLUX;
+        // Evidence must last before a lock, so a transient (sound after silence) is not a beat.
+        self.evident_frames = if evident { self.evident_frames + 1 } else { 0 };
+        let locked = evident
+            && (self.locked || self.evident_frames as f64 >= LOCK_SECONDS * self.frame_rate);
+        self.locked = locked;
+        if beat_due && !locked {
+            self.frames_since_beat = 0.0;
+        }
+        if beat_due && locked {
             let ago = pos as f64 - if pos + lead >= iv { iv as f64 } else { 0.0 };
             beat_frames_ago = Some(ago);
             self.frames_since_beat = ago;
@@ -348,7 +397,7 @@ mod tests {
             let mut beats = Vec::new();
             let strengths = click_strengths(bpm, fps, 20.0);
             for (t, &s) in strengths.iter().enumerate() {
-                let st = bt.process(s);
+                let st = bt.process(s, 0.0);
                 if let Some(ago) = st.beat_frames_ago {
                     beats.push(t as f64 - ago);
                 }
@@ -381,17 +430,23 @@ mod tests {
         let fps = crate::hop_rate();
         let mut bt = BeatTracker::new(fps);
         for _ in 0..(20.0 * fps) as usize {
-            assert!(bt.process(0.0).beat_frames_ago.is_none());
+            assert!(bt.process(0.0, 0.0).beat_frames_ago.is_none());
         }
+        // Stationary noise: the full-band flux is steady (many bands averaged), the few bass
+        // bins fluctuate wildly.
         let mut bt = BeatTracker::new(fps);
         let mut seed = 12345u64;
         let mut beats = 0;
-        for _ in 0..(30.0 * fps) as usize {
+        let mut uniform = || {
             seed = seed
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
-            let x = (seed >> 33) as f32 / (1u64 << 31) as f32;
-            if bt.process(x * 3.0).beat_frames_ago.is_some() {
+            (seed >> 33) as f32 / (1u64 << 31) as f32
+        };
+        for _ in 0..(30.0 * fps) as usize {
+            let full = 3.0 * (1.0 + 0.3 * (uniform() - 0.5));
+            let bass = 2.0 * uniform();
+            if bt.process(full, bass).beat_frames_ago.is_some() {
                 beats += 1;
             }
         }

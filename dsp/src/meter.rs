@@ -173,7 +173,7 @@ mod tests {
         let mut mt = MeterTracker::new();
         let mut out = Vec::new();
         for beat in 0..64usize {
-            let is_down = (beat + meter - downbeat_offset) % meter == 0;
+            let is_down = (beat + meter - downbeat_offset).is_multiple_of(meter);
             let span_chord = if beat == 0 {
                 [0.0; 12]
             } else {

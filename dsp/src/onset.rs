@@ -82,6 +82,12 @@ impl OnsetDetector {
     }
 }
 
+/// An onset must exceed the mean strength of the last 100 ms by this factor (plus a margin).
+const ONSET_MEAN_RATIO: f32 = 2.0;
+
+/// Below this onset contrast (mean absolute deviation over mean) the signal is steady noise.
+const MIN_CONTRAST: f32 = 0.3;
+
 /// Online peak picking: a frame is an onset when it is the maximum of the recent past, rises
 /// clearly above the recent mean, and is not too close to the previous onset. It looks at no
 /// future frame, so an onset is reported on the frame where it is detected.
@@ -94,6 +100,10 @@ pub struct OnsetPeakPicker {
     since_last: usize,
     level: f32,
     level_decay: f32,
+    long_mean: f32,
+    contrast: f32,
+    long_alpha: f32,
+    contrast_alpha: f32,
 }
 
 impl OnsetPeakPicker {
@@ -110,6 +120,12 @@ impl OnsetPeakPicker {
             since_last: usize::MAX / 2,
             level: 0.0,
             level_decay: (-1.0 / (2.0 * frame_rate)).exp() as f32,
+            long_mean: 0.0,
+            // Until the signal has shown itself steady, assume it is music: the first attack of
+            // a song must not be lost.
+            contrast: 1.0,
+            long_alpha: (1.0 / (2.0 * frame_rate)) as f32,
+            contrast_alpha: (1.0 / (0.5 * frame_rate)) as f32,
         }
     }
 
@@ -124,10 +140,19 @@ impl OnsetPeakPicker {
         // keeps noise in near-silence from firing.
         self.level =
             self.level.max(strength) * self.level_decay + strength * (1.0 - self.level_decay);
-        let threshold = mean + (0.12 * self.level).max(0.5);
+        // Relative to the local mean, so the steady flux of noise never reads as an attack.
+        let threshold = ONSET_MEAN_RATIO * mean + (0.1 * self.level).max(0.5);
+        // Stationary noise has a steady flux: its deviation from the long mean stays small.
+        self.long_mean += self.long_alpha * (strength - self.long_mean);
+        let z = strength / (self.long_mean + 1e-3);
+        self.contrast += self.contrast_alpha * ((z - 1.0).abs().min(4.0) - self.contrast);
         self.pos = (self.pos + 1) % n;
         self.since_last = self.since_last.saturating_add(1);
-        if is_max && strength > threshold && self.since_last > self.combine {
+        if is_max
+            && strength > threshold
+            && self.since_last > self.combine
+            && self.contrast > MIN_CONTRAST
+        {
             self.since_last = 0;
             true
         } else {

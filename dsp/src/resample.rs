@@ -6,7 +6,7 @@ use rubato::{Fft, FixedSync, Resampler};
 use crate::{ANALYSIS_RATE, DspError, MAX_INPUT_RATE, MIN_INPUT_RATE};
 
 /// Input frames gathered before each resampler call: small, because the wait adds latency.
-const CHUNK_HINT: usize = 512;
+const CHUNK_HINT: usize = 256;
 
 /// Turns interleaved PCM of any channel count and rate into mono samples at [`ANALYSIS_RATE`].
 ///
@@ -99,13 +99,18 @@ impl StreamResampler {
                 self.flush_chunk(emit);
             }
         }
+        // Without resampling there is nothing to wait for: hand over what this block brought.
+        if self.resampler.is_none() && self.filled > 0 {
+            self.flush_chunk(emit);
+        }
     }
 
     fn flush_chunk(&mut self, emit: &mut impl FnMut(&[f32], f64)) {
         let now = self.consumed_frames as f64 / self.input_rate as f64;
+        let filled = self.filled;
         self.filled = 0;
         match self.resampler.as_mut() {
-            None => emit(&self.chunk, now),
+            None => emit(&self.chunk[..filled], now),
             Some(r) => {
                 let n_in = self.chunk.len();
                 let n_out = self.out.len();
