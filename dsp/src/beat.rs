@@ -51,7 +51,7 @@ impl Default for BeatTrackerParams {
     fn default() -> Self {
         Self {
             transition_lambda: 100.0,
-            observation_beta: 1.0,
+            observation_beta: 0.8,
             max_relative_strength: 30.0,
             norm_seconds: 3.0,
             prior_bpm: 120.0,

@@ -5,12 +5,16 @@ use rubato::{Fft, FixedSync, Resampler};
 
 use crate::{ANALYSIS_RATE, DspError, MAX_INPUT_RATE, MIN_INPUT_RATE};
 
+/// Largest sample magnitude passed on (+18 dBFS): beyond it a driver is sending garbage, and
+/// squaring such values would overflow the energy to infinity.
+const MAX_SAMPLE: f32 = 8.0;
+
 /// Input frames gathered before each resampler call: small, because the wait adds latency.
 const CHUNK_HINT: usize = 256;
 
 /// Turns interleaved PCM of any channel count and rate into mono samples at [`ANALYSIS_RATE`].
 ///
-/// Non-finite input samples are replaced by silence so that one bad sample from a driver cannot
+/// Non-finite input samples are replaced by silence and huge ones clamped, so that one bad sample from a driver cannot
 /// poison every later feature.
 pub struct StreamResampler {
     channels: usize,
@@ -90,7 +94,11 @@ impl StreamResampler {
         for frame in interleaved.chunks_exact(ch) {
             let mut s = 0.0f32;
             for &x in frame {
-                s += if x.is_finite() { x } else { 0.0 };
+                s += if x.is_finite() {
+                    x.clamp(-MAX_SAMPLE, MAX_SAMPLE)
+                } else {
+                    0.0
+                };
             }
             self.chunk[self.filled] = s * norm;
             self.filled += 1;
@@ -176,7 +184,10 @@ mod tests {
     fn passes_through_at_analysis_rate_and_downmixes() {
         let mut r = StreamResampler::new(ANALYSIS_RATE, 2).unwrap();
         let input: Vec<f32> = (0..2048)
-            .flat_map(|i| [i as f32, -(i as f32) + 1.0])
+            .flat_map(|i| {
+                let x = (i % 100) as f32 / 100.0;
+                [x, 1.0 - x]
+            })
             .collect();
         let mut out = Vec::new();
         r.push(&input, &mut |s, _| out.extend_from_slice(s));
