@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod decode;
+pub mod demo_track;
 pub mod offline;
 pub mod output;
 pub mod plot;

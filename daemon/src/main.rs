@@ -1,6 +1,6 @@
 //! `danced`: the command line.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tracing_subscriber::EnvFilter;
 
 use daemon::bench;
-use daemon::offline::{AnalyzeOptions, analyze_file};
+use daemon::offline::{AnalyzeOptions, analyze_file, analyze_samples};
 use daemon::output::{beats_text, features_npy, features_sidecar, onsets_text, write_atomic};
 use dsp::BeatTrackerKind;
 
@@ -57,8 +57,9 @@ impl From<TrackerArg> for BeatTrackerKind {
 
 #[derive(clap::Args, Debug)]
 struct AnalyzeArgs {
-    /// Audio file (wav, mp3, ogg/vorbis, flac, m4a/aac).
-    audio: PathBuf,
+    /// Audio file (wav, mp3, ogg/vorbis, flac, m4a/aac). Without one, the built-in demo song
+    /// (30 s, 124 BPM, 4/4, synthesised in code) is analysed.
+    audio: Option<PathBuf>,
     /// Beat and onset tracker.
     #[arg(long, value_enum, default_value_t = TrackerArg::Native)]
     beat_tracker: TrackerArg,
@@ -139,17 +140,36 @@ fn analyze(args: AnalyzeArgs) -> Result<()> {
         keep_hops: args.plot.is_some(),
         beat_params: Default::default(),
     };
-    let result = analyze_file(&args.audio, options, &mut |done, total| {
-        // Only long files get a visible bar: a short one is done before it would be read.
-        if let Some(total) = total
-            && total > 60.0
-        {
-            pb.set_length(total as u64);
-            pb.set_position(done as u64);
+    let name = match &args.audio {
+        Some(p) => p.display().to_string(),
+        None => format!(
+            "built-in demo song ({} BPM, 4/4)",
+            daemon::demo_track::DEMO_BPM
+        ),
+    };
+    let result = match &args.audio {
+        Some(path) => analyze_file(path, options, &mut |done, total| {
+            // Only long files get a visible bar: a short one is done before it would be read.
+            if let Some(total) = total
+                && total > 60.0
+            {
+                pb.set_length(total as u64);
+                pb.set_position(done as u64);
+            }
+        }),
+        None => {
+            let demo = daemon::demo_track::demo_track(30.0);
+            analyze_samples(
+                &name,
+                &demo.samples,
+                daemon::demo_track::DEMO_RATE,
+                2,
+                options,
+            )
         }
-    });
+    };
     pb.finish_and_clear();
-    let a = result.with_context(|| format!("analysing {}", args.audio.display()))?;
+    let a = result.with_context(|| format!("analysing {name}"))?;
 
     if let Some(p) = &args.beats_out {
         write_atomic(p, beats_text(&a.beats).as_bytes())
@@ -173,8 +193,7 @@ fn analyze(args: AnalyzeArgs) -> Result<()> {
     }
     if let Some(p) = &args.plot {
         let title = format!(
-            "{} — {}",
-            args.audio.display(),
+            "{name} — {}",
             args.beat_tracker
                 .to_possible_value()
                 .map(|v| v.get_name().to_string())
@@ -190,7 +209,7 @@ fn analyze(args: AnalyzeArgs) -> Result<()> {
         .count();
     let downbeats = a.beats.iter().filter(|b| b.beat_in_bar == 1).count();
     let meter = a.beats.last().map(|b| b.beats_per_bar).unwrap_or(0);
-    println!("file        {}", args.audio.display());
+    println!("audio file  {name}");
     println!(
         "audio       {:.1} s, {} Hz, {} ch",
         a.duration_s, a.sample_rate, a.channels
@@ -327,9 +346,4 @@ fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
         println!("| {} |", row.join(" | "));
     }
     Ok(())
-}
-
-#[allow(dead_code)]
-fn exists(p: &Path) -> bool {
-    p.exists()
 }

@@ -136,7 +136,7 @@ impl AnalysisSink for Collector<'_> {
 }
 
 /// Decodes `path` packet by packet and streams it through the analyzer in [`BLOCK_FRAMES`]
-/// blocks; `progress` hears the seconds of audio done so far.
+/// blocks; `progress` hears the seconds of audio done so far (and the total, when known).
 pub fn analyze_file(
     path: &Path,
     options: AnalyzeOptions,
@@ -144,9 +144,65 @@ pub fn analyze_file(
 ) -> Result<FileAnalysis, AnalyzeError> {
     let decode_start = Instant::now();
     let mut reader = AudioFileReader::open(path)?;
-    let mut decode_time = decode_start.elapsed();
+    let open_time = decode_start.elapsed();
     let (rate, channels) = (reader.sample_rate(), reader.channels());
     let total_s = reader.total_frames().map(|f| f as f64 / rate as f64);
+    let mut result = stream(
+        path.display().to_string(),
+        rate,
+        channels,
+        options,
+        total_s,
+        progress,
+        &mut |out| Ok(reader.read_block(out)?),
+    )?;
+    result.decode_time += open_time;
+    result.skipped_packets = reader.skipped_packets();
+    if result.duration_s == 0.0 {
+        return Err(DecodeError::Empty {
+            path: path.to_path_buf(),
+        }
+        .into());
+    }
+    Ok(result)
+}
+
+/// Streams interleaved samples already in memory through the analyzer in [`BLOCK_FRAMES`]
+/// blocks (the built-in demo song, tests).
+pub fn analyze_samples(
+    name: &str,
+    samples: &[f32],
+    rate: u32,
+    channels: u16,
+    options: AnalyzeOptions,
+) -> Result<FileAnalysis, AnalyzeError> {
+    let mut chunks = samples.chunks(BLOCK_FRAMES * 16 * channels.max(1) as usize);
+    stream(
+        name.to_string(),
+        rate,
+        channels,
+        options,
+        None,
+        &mut |_, _| {},
+        &mut |out| {
+            out.clear();
+            if let Some(c) = chunks.next() {
+                out.extend_from_slice(c);
+            }
+            Ok(out.len() / channels.max(1) as usize)
+        },
+    )
+}
+
+fn stream(
+    name: String,
+    rate: u32,
+    channels: u16,
+    options: AnalyzeOptions,
+    total_s: Option<f64>,
+    progress: &mut dyn FnMut(f64, Option<f64>),
+    next: &mut dyn FnMut(&mut Vec<f32>) -> Result<usize, AnalyzeError>,
+) -> Result<FileAnalysis, AnalyzeError> {
     let mut analyzer = Analyzer::new(AnalyzerConfig {
         sample_rate: rate,
         channels,
@@ -154,15 +210,13 @@ pub fn analyze_file(
         tracker: options.tracker,
         beat_params: options.beat_params,
     })
-    .map_err(|source| AnalyzeError::Dsp {
-        path: path.display().to_string(),
-        source,
-    })?;
+    .map_err(|source| AnalyzeError::Dsp { path: name, source })?;
     let mut result = FileAnalysis {
         sample_rate: rate,
         channels,
         ..Default::default()
     };
+    let mut decode_time = Duration::ZERO;
     let mut analysis_time = Duration::ZERO;
     let mut packet = Vec::new();
     let mut frames_total = 0u64;
@@ -170,7 +224,7 @@ pub fn analyze_file(
     let mut last_report = 0.0;
     loop {
         let t = Instant::now();
-        let n = reader.read_block(&mut packet)?;
+        let n = next(&mut packet)?;
         decode_time += t.elapsed();
         if n == 0 {
             break;
@@ -191,16 +245,9 @@ pub fn analyze_file(
             last_report = done;
         }
     }
-    if frames_total == 0 {
-        return Err(DecodeError::Empty {
-            path: path.to_path_buf(),
-        }
-        .into());
-    }
     result.duration_s = frames_total as f64 / rate as f64;
     result.decode_time = decode_time;
     result.analysis_time = analysis_time;
-    result.skipped_packets = reader.skipped_packets();
     progress(result.duration_s, total_s);
     Ok(result)
 }

@@ -1,0 +1,136 @@
+//! The `danced` binary as a user runs it.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn danced() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_danced"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("danced-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// 16-bit PCM WAV writer, enough for tests.
+fn write_wav(path: &Path, samples: &[f32], rate: u32, channels: u16) {
+    let data_len = (samples.len() * 2) as u32;
+    let mut b = Vec::with_capacity(44 + data_len as usize);
+    b.extend_from_slice(b"RIFF");
+    b.extend_from_slice(&(36 + data_len).to_le_bytes());
+    b.extend_from_slice(b"WAVEfmt ");
+    b.extend_from_slice(&16u32.to_le_bytes());
+    b.extend_from_slice(&1u16.to_le_bytes());
+    b.extend_from_slice(&channels.to_le_bytes());
+    b.extend_from_slice(&rate.to_le_bytes());
+    b.extend_from_slice(&(rate * channels as u32 * 2).to_le_bytes());
+    b.extend_from_slice(&(channels * 2).to_le_bytes());
+    b.extend_from_slice(&16u16.to_le_bytes());
+    b.extend_from_slice(b"data");
+    b.extend_from_slice(&data_len.to_le_bytes());
+    for s in samples {
+        b.extend_from_slice(&((s.clamp(-1.0, 1.0) * 32767.0) as i16).to_le_bytes());
+    }
+    std::fs::write(path, b).unwrap();
+}
+
+#[test]
+fn analyze_writes_beats_onsets_features_and_plot() {
+    let dir = scratch("analyze");
+    let wav = dir.join("demo.wav");
+    let demo = daemon::demo_track::demo_track(20.0);
+    write_wav(&wav, &demo.samples, daemon::demo_track::DEMO_RATE, 2);
+    let out = danced()
+        .args(["analyze", wav.to_str().unwrap(), "--rate", "25"])
+        .arg("--beats-out")
+        .arg(dir.join("b.txt"))
+        .arg("--onsets-out")
+        .arg(dir.join("o.txt"))
+        .arg("--features-out")
+        .arg(dir.join("f.npy"))
+        .arg("--plot")
+        .arg(dir.join("p.png"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("124.0 BPM")
+            || stdout.contains("123.9 BPM")
+            || stdout.contains("124.1 BPM"),
+        "{stdout}"
+    );
+    let beats = std::fs::read_to_string(dir.join("b.txt")).unwrap();
+    let rows: Vec<Vec<f64>> = beats
+        .lines()
+        .map(|l| l.split('\t').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert!(rows.len() > 25, "{} beats", rows.len());
+    for r in &rows {
+        assert_eq!(r.len(), 3);
+        assert!((1.0..=4.0).contains(&r[1]));
+        assert!(
+            r[2] >= r[0] - 0.05 && r[2] - r[0] <= 0.05,
+            "decided {} for beat {}",
+            r[2],
+            r[0]
+        );
+    }
+    assert!(
+        std::fs::read_to_string(dir.join("o.txt"))
+            .unwrap()
+            .lines()
+            .count()
+            > 30
+    );
+    let npy = std::fs::read(dir.join("f.npy")).unwrap();
+    assert!(npy.starts_with(b"\x93NUMPY"));
+    let header = String::from_utf8_lossy(&npy[..128]);
+    assert!(
+        header.contains("'shape': (499, 83)") || header.contains("'shape': (500, 83)"),
+        "{header}"
+    );
+    let sidecar = std::fs::read_to_string(dir.join("f.json")).unwrap();
+    assert!(sidecar.contains("\"layout_version\": 1") && sidecar.contains("\"tempo_bpm\""));
+    let png = std::fs::read(dir.join("p.png")).unwrap();
+    assert!(png.starts_with(b"\x89PNG") && png.len() > 20_000);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn analyze_without_a_file_uses_the_built_in_song() {
+    let out = danced().arg("analyze").output().unwrap();
+    assert!(out.status.success());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("built-in demo song"), "{stdout}");
+}
+
+#[test]
+fn bad_input_exits_non_zero_naming_the_file() {
+    let dir = scratch("bad");
+    let junk = dir.join("junk.ogg");
+    std::fs::write(&junk, [0u8, 1, 2, 3, 255, 254].repeat(500)).unwrap();
+    for p in [dir.join("nope.wav"), junk] {
+        let out = danced().arg("analyze").arg(&p).output().unwrap();
+        assert!(!out.status.success());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains(p.file_name().unwrap().to_str().unwrap()),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+    let out = danced()
+        .args(["bench", "beats", "--data"])
+        .arg(dir.join("no-data"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no-data"));
+    std::fs::remove_dir_all(&dir).ok();
+}
