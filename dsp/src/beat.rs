@@ -6,10 +6,6 @@
 //! falls off exponentially with the tempo ratio. Frames at the start of a beat expect onsets.
 //! The tracker keeps only the forward probabilities, so every decision uses the past alone.
 
-/// Slowest tempo tracked, in beats per minute.
-pub const MIN_BPM: f64 = 55.0;
-/// Fastest tempo tracked, in beats per minute.
-pub const MAX_BPM: f64 = 215.0;
 /// One beat state per this many positions of a beat expects an onset.
 const OBSERVATION_LAMBDA: usize = 16;
 /// Seconds of continuous evidence before beats are reported.
@@ -23,6 +19,10 @@ const SILENCE_FLUX: f32 = 0.05;
 /// songs outside the benchmark sets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BeatTrackerParams {
+    /// Slowest tempo tracked, in beats per minute.
+    pub min_bpm: f64,
+    /// Fastest tempo tracked, in beats per minute.
+    pub max_bpm: f64,
     /// How sharply the tempo may change between beats (Krebs et al. use 100).
     pub transition_lambda: f64,
     /// Slope of the log likelihood ratio of a beat against relative onset strength.
@@ -43,6 +43,8 @@ pub struct BeatTrackerParams {
     pub salience_gate: f32,
     /// Beats are reported this many frames before they are due (compensates analysis delay).
     pub lead_frames: usize,
+    /// When above 0, the likelihood ratio is `((1 + z) / 2)^power` instead of `exp(beta (z − 1))`.
+    pub observation_power: f64,
     /// Extra weight of bass-band onsets (kick drums, bass notes) in the beat observation.
     pub bass_weight: f32,
 }
@@ -50,6 +52,8 @@ pub struct BeatTrackerParams {
 impl Default for BeatTrackerParams {
     fn default() -> Self {
         Self {
+            min_bpm: 65.0,
+            max_bpm: 215.0,
             transition_lambda: 100.0,
             observation_beta: 0.8,
             max_relative_strength: 30.0,
@@ -60,6 +64,7 @@ impl Default for BeatTrackerParams {
             salience_gate: 1.5,
             lead_frames: 0,
             bass_weight: 6.0,
+            observation_power: 0.0,
         }
     }
 }
@@ -77,6 +82,8 @@ impl BeatTrackerParams {
                 .parse()
                 .map_err(|_| format!("{k}: not a number: {v:?}"))?;
             match k.trim() {
+                "min_bpm" => self.min_bpm = x.clamp(20.0, 300.0),
+                "max_bpm" => self.max_bpm = x.clamp(20.0, 400.0),
                 "transition_lambda" => self.transition_lambda = x,
                 "observation_beta" => self.observation_beta = x,
                 "max_relative_strength" => self.max_relative_strength = x as f32,
@@ -87,6 +94,7 @@ impl BeatTrackerParams {
                 "salience_gate" => self.salience_gate = x as f32,
                 "lead_frames" => self.lead_frames = x as usize,
                 "bass_weight" => self.bass_weight = x as f32,
+                "observation_power" => self.observation_power = x,
                 other => return Err(format!("unknown beat tracker parameter {other:?}")),
             }
         }
@@ -146,8 +154,8 @@ impl BeatTracker {
 
     /// Builds a tracker with explicit tuning.
     pub fn with_params(frame_rate: f64, params: BeatTrackerParams) -> Self {
-        let min_iv = (60.0 * frame_rate / MAX_BPM).floor().max(2.0) as usize;
-        let max_iv = (60.0 * frame_rate / MIN_BPM).ceil() as usize;
+        let min_iv = (60.0 * frame_rate / params.max_bpm).floor().max(2.0) as usize;
+        let max_iv = ((60.0 * frame_rate / params.min_bpm).ceil() as usize).max(min_iv + 1);
         let intervals: Vec<usize> = (min_iv..=max_iv).collect();
         let mut offsets = Vec::with_capacity(intervals.len());
         let mut total = 0;
@@ -231,7 +239,11 @@ impl BeatTracker {
         self.norm_mean += self.norm_alpha * (s - self.norm_mean);
         let z = (s / (self.norm_mean + 1e-3)).min(self.params.max_relative_strength);
         self.recent_z = [self.recent_z[1], self.recent_z[2], z];
-        (self.params.observation_beta * (z as f64 - 1.0)).exp()
+        if self.params.observation_power > 0.0 {
+            ((1.0 + z as f64) / 2.0).powf(self.params.observation_power)
+        } else {
+            (self.params.observation_beta * (z as f64 - 1.0)).exp()
+        }
     }
 
     /// Consumes one frame's onset strength (all bands and bass bands); returns the updated state.
