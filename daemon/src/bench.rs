@@ -29,6 +29,8 @@ pub struct BenchItem {
     pub span: Option<(f64, f64)>,
     /// Reference onset times, if annotated.
     pub onsets: Option<Vec<f64>>,
+    /// Reference downbeat times, where the annotation gives positions in the bar.
+    pub downbeats: Option<Vec<f64>>,
     /// Seconds at the start left unscored (mir_eval skips 5 s; a clip shorter than that can't).
     pub skip_s: f64,
 }
@@ -55,6 +57,8 @@ pub struct ItemScore {
     pub amlt: f64,
     /// Onset F-measure, where onsets are annotated.
     pub onset_f: Option<f64>,
+    /// Downbeat F-measure (±70 ms), where downbeats are annotated.
+    pub downbeat_f: Option<f64>,
     /// Beats dropped for being decided too late.
     pub late_beats: usize,
     /// Beats emitted.
@@ -91,12 +95,14 @@ pub fn synth_set(data: &Path) -> BenchSet {
                 .unwrap_or_default()
                 .to_string_lossy()
                 .into_owned();
+            let downbeats = read_downbeats(&p.with_extension("beats"));
             items.push(BenchItem {
                 name,
                 audio: p,
                 beats,
                 span: None,
                 onsets: None,
+                downbeats,
                 skip_s: metrics::MIN_BEAT_TIME_S,
             });
         }
@@ -147,6 +153,7 @@ pub fn tang_set(data: &Path) -> BenchSet {
             beats,
             span,
             onsets: None,
+            downbeats: None,
             skip_s: metrics::MIN_BEAT_TIME_S,
         });
     }
@@ -167,6 +174,7 @@ pub fn madmom_set(data: &Path) -> BenchSet {
             beats,
             span: None,
             onsets: read_times(&dir.join("sample.onsets")).ok(),
+            downbeats: read_downbeats(&dir.join("sample.beats")),
             skip_s: 0.0,
         });
     }
@@ -174,6 +182,22 @@ pub fn madmom_set(data: &Path) -> BenchSet {
         name: "madmom-tests",
         items,
     }
+}
+
+/// Downbeats from a beat file whose second column is the position in the bar (1 = downbeat).
+fn read_downbeats(path: &Path) -> Option<Vec<f64>> {
+    let text = fs::read_to_string(path).ok()?;
+    let mut out = Vec::new();
+    for line in text.lines().filter(|l| !l.starts_with('#')) {
+        let mut cols = line.split_whitespace();
+        let (Some(t), Some(p)) = (cols.next(), cols.next()) else {
+            continue;
+        };
+        if p.parse::<f64>().ok()? == 1.0 {
+            out.push(t.parse().ok()?);
+        }
+    }
+    Some(out)
 }
 
 fn in_span(times: &[f64], span: Option<(f64, f64)>) -> Vec<f64> {
@@ -207,6 +231,17 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
     let estimated = metrics::trim_beats(&estimated, item.skip_s);
     let f_measure = metrics::beat_f_measure(&reference, &estimated, BEAT_TOLERANCE_S);
     let c = metrics::continuity(&reference, &estimated);
+    let downbeat_f = item.downbeats.as_ref().map(|r| {
+        let est: Vec<f64> = analysis
+            .beats
+            .iter()
+            .filter(|b| b.beat_in_bar == 1 && b.decided_at_s - b.time_s <= MAX_DECISION_LAG_S)
+            .map(|b| b.time_s)
+            .collect();
+        let r = metrics::trim_beats(&in_span(r, item.span), item.skip_s);
+        let e = metrics::trim_beats(&in_span(&est, item.span), item.skip_s);
+        metrics::beat_f_measure(&r, &e, BEAT_TOLERANCE_S)
+    });
     let onset_f = item.onsets.as_ref().map(|r| {
         let est: Vec<f64> = analysis.onsets.iter().map(|o| o.time_s).collect();
         metrics::onset_f_measure(r, &est, ONSET_TOLERANCE_S).f_measure
@@ -217,6 +252,7 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
         cmlt: c.cmlt,
         amlt: c.amlt,
         onset_f,
+        downbeat_f,
         late_beats: analysis.beats.len() - timely.len(),
         beats: analysis.beats.len(),
         median_lag_s: lags.get(lags.len() / 2).copied().unwrap_or(0.0),
@@ -304,11 +340,12 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
         }
         let _ = writeln!(
             out,
-            "| {} | {:.3} | {:.3} | {:.3} | {:.1} | {} | {} | {:.0} |",
+            "| {} | {:.3} | {:.3} | {:.3} | {} | {:.1} | {} | {} | {:.0} |",
             s.name,
             s.f_measure,
             s.cmlt,
             s.amlt,
+            s.downbeat_f.map_or("–".to_string(), |f| format!("{f:.3}")),
             s.tempo_bpm,
             s.beats,
             s.late_beats,

@@ -304,14 +304,19 @@ fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
                     s.error.as_deref().unwrap_or("")
                 ));
             }
-            let extra = if set.name == "madmom-tests" {
-                format!(
-                    " (onset F {:.3})",
+            let mut extra = String::new();
+            if scores.iter().any(|s| s.downbeat_f.is_some()) {
+                extra += &format!(
+                    ", downbeat F {:.3}",
+                    bench::mean(&scores, |s| s.downbeat_f.unwrap_or(0.0))
+                );
+            }
+            if scores.iter().any(|s| s.onset_f.is_some()) {
+                extra += &format!(
+                    ", onset F {:.3}",
                     bench::mean(&scores, |s| s.onset_f.unwrap_or(0.0))
-                )
-            } else {
-                String::new()
-            };
+                );
+            }
             row.push(format!(
                 "{:.3} / {:.3} / {:.3}{extra}",
                 bench::mean(&scores, |s| s.f_measure),
