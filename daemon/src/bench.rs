@@ -67,6 +67,8 @@ pub struct ItemScore {
     pub median_lag_s: f64,
     /// Median reported tempo, BPM.
     pub tempo_bpm: f64,
+    /// Beats per bar most often reported over the scored span.
+    pub meter: usize,
     /// Audio seconds.
     pub duration_s: f64,
     /// Analyzer seconds.
@@ -257,6 +259,20 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
         beats: analysis.beats.len(),
         median_lag_s: lags.get(lags.len() / 2).copied().unwrap_or(0.0),
         tempo_bpm: analysis.median_tempo(),
+        meter: {
+            let threes = analysis
+                .beats
+                .iter()
+                .filter(|b| b.beats_per_bar == 3)
+                .count();
+            if analysis.beats.is_empty() {
+                0
+            } else if 2 * threes > analysis.beats.len() {
+                3
+            } else {
+                4
+            }
+        },
         duration_s: analysis.duration_s,
         analysis_s: analysis.analysis_time.as_secs_f64(),
         error: None,
@@ -340,12 +356,13 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
         }
         let _ = writeln!(
             out,
-            "| {} | {:.3} | {:.3} | {:.3} | {} | {:.1} | {} | {} | {:.0} |",
+            "| {} | {:.3} | {:.3} | {:.3} | {} | {} | {:.1} | {} | {} | {:.0} |",
             s.name,
             s.f_measure,
             s.cmlt,
             s.amlt,
             s.downbeat_f.map_or("–".to_string(), |f| format!("{f:.3}")),
+            s.meter,
             s.tempo_bpm,
             s.beats,
             s.late_beats,

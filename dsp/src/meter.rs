@@ -87,8 +87,8 @@ impl MeterTracker {
         if index >= 2 {
             self.mean_change += 0.1 * (change - self.mean_change);
             self.mean_bass += 0.1 * (self.pending_bass - self.mean_bass);
-            let evidence = change / self.mean_change.max(1e-3)
-                + 0.5 * self.pending_bass / self.mean_bass.max(1e-3);
+            let evidence =
+                change / self.mean_change.max(1e-3) + self.pending_bass / self.mean_bass.max(1e-3);
             for (mi, &m) in METERS.iter().enumerate() {
                 let p = (index - 1) % m;
                 self.scores[mi][p] += POSITION_ALPHA * (evidence - self.scores[mi][p]);
