@@ -9,7 +9,7 @@
 /// One beat state per this many positions of a beat expects an onset.
 const OBSERVATION_LAMBDA: usize = 16;
 /// Seconds of continuous evidence before beats are reported.
-const LOCK_SECONDS: f64 = 1.5;
+const LOCK_SECONDS: f64 = 1.0;
 /// Once locked, the gates drop to this fraction of their values.
 const UNLOCK_FACTOR: f32 = 0.75;
 /// Mean onset strength below which the input counts as silence.
