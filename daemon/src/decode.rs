@@ -791,8 +791,13 @@ mod tests {
         }
     }
 
+    /// `../shared/data` beside the repository.
+    fn shared_data() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
+    }
+
     fn madmom_dir() -> Option<PathBuf> {
-        let dir = Path::new("/work/shared/data/madmom-tests");
+        let dir = shared_data().join("madmom-tests");
         if dir.is_dir() {
             Some(dir.to_path_buf())
         } else {
@@ -877,7 +882,7 @@ mod tests {
 
     /// DANCE_C_1 has no audio in the shared copy of the data set; take the first that does.
     fn tang2018_mp3_path() -> Option<PathBuf> {
-        let root = Path::new("/work/shared/data/tang2018");
+        let root = shared_data().join("tang2018");
         let found = ["DANCE_C_1", "DANCE_C_2", "DANCE_C_4", "DANCE_R_2"]
             .iter()
             .map(|d| root.join(d).join("audio.mp3"))
