@@ -1,0 +1,10 @@
+//! Motion for danced: the humanoid rig, forward kinematics, rotation conversions, motion
+//! features, importers and the dance metrics every later evaluation uses.
+//!
+//! Like `dsp`, this crate knows nothing of threads, sockets or audio devices.
+
+pub mod metrics;
+pub mod motion;
+pub mod rig;
+pub mod rotation;
+pub mod tang2018;
