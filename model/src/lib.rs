@@ -3,6 +3,7 @@
 //!
 //! Like `dsp`, this crate knows nothing of threads, sockets or audio devices.
 
+pub mod alignment;
 pub mod metrics;
 pub mod motion;
 pub mod rig;
