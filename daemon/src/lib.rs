@@ -3,6 +3,7 @@
 //! This crate wires the `dsp` analysis to files, commands and (later) the live pipeline.
 
 pub mod bench;
+pub mod dataset;
 pub mod decode;
 pub mod demo_track;
 pub mod offline;

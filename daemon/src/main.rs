@@ -30,6 +30,49 @@ enum Command {
         #[command(subcommand)]
         what: BenchCommand,
     },
+    /// Export a tang2018 dance, fitted to the rig, as BVH.
+    Bvh {
+        /// Dance folder name, e.g. DANCE_W_1.
+        #[arg(long)]
+        dance: String,
+        /// Output BVH file.
+        #[arg(long)]
+        out: PathBuf,
+        /// The shared data folder.
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+    },
+    /// Dance metrics of a BVH motion against a song's beats (BeatAlign, beat offset, kinetic
+    /// features, freezes, foot skating).
+    Metrics {
+        /// The motion (any BVH rig with recognisable joint names).
+        bvh: PathBuf,
+        /// The song the motion dances to.
+        #[arg(long)]
+        audio: PathBuf,
+        /// Song time of the motion's first frame, seconds.
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        offset: f64,
+    },
+    /// The tang2018 training data: audit it.
+    Dataset {
+        #[command(subcommand)]
+        what: DatasetCommand,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum DatasetCommand {
+    /// One row per dance: frames, seconds, rig fit error, bone-length spread, measured music
+    /// offset, tempo, and the ground truth's BeatAlign and beat offset.
+    Audit {
+        /// The shared data folder (holds tang2018/ and tang2018-beats/).
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Worker threads.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+    },
 }
 
 #[derive(Subcommand, Debug)]
@@ -115,6 +158,11 @@ fn main() -> Result<()> {
         Command::Bench {
             what: BenchCommand::Beats(args),
         } => bench_beats(args),
+        Command::Dataset {
+            what: DatasetCommand::Audit { data, jobs },
+        } => dataset_audit(&data, jobs),
+        Command::Bvh { dance, out, data } => export_dance(&data, &dance, &out),
+        Command::Metrics { bvh, audio, offset } => motion_metrics(&bvh, &audio, offset),
     }
 }
 
@@ -350,5 +398,139 @@ fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
     for row in rows {
         println!("| {} |", row.join(" | "));
     }
+    Ok(())
+}
+
+fn dataset_audit(data: &std::path::Path, jobs: usize) -> Result<()> {
+    if !data.join("tang2018").is_dir() {
+        bail!(
+            "{} not found (pass --data DIR; see the README's Data section)",
+            data.join("tang2018").display()
+        );
+    }
+    let pb = ProgressBar::new(43);
+    pb.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let started = Instant::now();
+    let rows = daemon::dataset::audit(data, jobs, &|name| {
+        pb.set_message(name.to_string());
+        pb.inc(1);
+    })
+    .with_context(|| format!("reading {}", data.display()))?;
+    pb.finish_and_clear();
+    print!("{}", daemon::dataset::audit_table(&rows));
+    for r in rows.iter().filter(|r| r.problem.is_some() && r.frames > 0) {
+        eprintln!("{}: {}", r.name, r.problem.as_deref().unwrap_or(""));
+    }
+    eprintln!(
+        "audited {} dances in {:.1} s",
+        rows.len(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn export_dance(data: &std::path::Path, dance: &str, out: &std::path::Path) -> Result<()> {
+    let dir = data.join("tang2018").join(dance);
+    let d = model::tang2018::load_dance(&dir)
+        .with_context(|| format!("reading dance {}", dir.display()))?;
+    let fit =
+        model::tang_fit::fit_dance(&d).with_context(|| format!("fitting the rig to {dance}"))?;
+    let bvh = model::bvh::export(&fit.skeleton, &fit.poses, fit.fps);
+    bvh.write(out)
+        .with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "{dance}: {} frames at {} fps, fit error {:.2} cm → {}",
+        fit.poses.len(),
+        fit.fps,
+        fit.mean_error_cm,
+        out.display()
+    );
+    Ok(())
+}
+
+fn motion_metrics(bvh_path: &std::path::Path, audio: &std::path::Path, offset: f64) -> Result<()> {
+    use model::metrics::{ContactParams, FreezeParams, JointTrack};
+    use model::rig::{JOINT_COUNT, Joint, Skeleton};
+    let bvh = model::bvh::Bvh::read(bvh_path)?;
+    let skeleton = Skeleton::default_adult();
+    let motion = model::bvh::retarget(&bvh, &skeleton, &Default::default())
+        .with_context(|| format!("retargeting {} onto the rig", bvh_path.display()))?;
+    let mut positions = Vec::with_capacity(motion.poses.len() * JOINT_COUNT);
+    let mut frame = [glam::Vec3::ZERO; JOINT_COUNT];
+    for p in &motion.poses {
+        skeleton.world_positions(p, &mut frame);
+        positions.extend_from_slice(&frame);
+    }
+    let track = JointTrack::new(&positions, JOINT_COUNT, motion.fps)?;
+    let opts = AnalyzeOptions {
+        tracker: BeatTrackerKind::Native,
+        model_rate: None,
+        keep_hops: false,
+        beat_params: Default::default(),
+    };
+    let a = analyze_file(audio, opts, &mut |_, _| {})
+        .with_context(|| format!("analysing {}", audio.display()))?;
+    let beats: Vec<f64> = a
+        .beats
+        .iter()
+        .map(|b| b.time_s - offset)
+        .filter(|t| *t >= 0.0)
+        .collect();
+    println!(
+        "motion      {} ({} frames at {:.2} fps, {:.1} s)",
+        bvh_path.display(),
+        track.frames(),
+        track.fps(),
+        track.duration_s()
+    );
+    println!(
+        "music       {} ({} beats in the motion's span, {:.1} BPM)",
+        audio.display(),
+        beats.iter().filter(|t| **t <= track.duration_s()).count(),
+        a.median_tempo()
+    );
+    println!(
+        "BeatAlign   {:.3}",
+        model::metrics::beat_align(&track, &beats)
+    );
+    match model::metrics::beat_offset(&track, Joint::Hips.index(), &beats) {
+        Ok(o) => println!("beat offset {:.3} ± {:.3} s", o.mean_s, o.sd_s),
+        Err(e) => println!("beat offset – ({e})"),
+    }
+    let kinetic = model::metrics::kinetic_features(&track)?;
+    let energy: f64 = kinetic.iter().sum::<f64>() / kinetic.len().max(1) as f64;
+    println!(
+        "kinetic     mean feature {energy:.4} over {} values",
+        kinetic.len()
+    );
+    let f = model::metrics::detect_freezes(&track, FreezeParams::default())?;
+    println!(
+        "freezes     {} ({:.1} s frozen of {:.1} s)",
+        f.freezes, f.frozen_s, f.analysed_s
+    );
+    let toes = [Joint::LeftToes.index(), Joint::RightToes.index()];
+    // Captures put the floor anywhere: take it as the 5th percentile of the toes' heights.
+    let mut heights: Vec<f64> = positions
+        .chunks_exact(JOINT_COUNT)
+        .flat_map(|f| toes.map(|t| f[t].y as f64))
+        .collect();
+    heights.sort_by(f64::total_cmp);
+    let ground_y_m = heights.get(heights.len() / 20).copied().unwrap_or(0.0);
+    let s = model::metrics::foot_skating(
+        &track,
+        &toes,
+        ContactParams {
+            ground_y_m,
+            ..ContactParams::default()
+        },
+    )?;
+    println!(
+        "foot skate  {:.3} m/s while in contact ({:.0} % of the time; floor at {ground_y_m:.3} m)",
+        s.mean_speed_mps,
+        100.0 * s.contact_fraction
+    );
     Ok(())
 }

@@ -4,8 +4,10 @@
 //! Like `dsp`, this crate knows nothing of threads, sockets or audio devices.
 
 pub mod alignment;
+pub mod bvh;
 pub mod metrics;
 pub mod motion;
 pub mod rig;
 pub mod rotation;
 pub mod tang2018;
+pub mod tang_fit;
