@@ -38,6 +38,8 @@ pub struct AuditRow {
     pub beat_align: Option<f64>,
     /// Ground-truth beat offset (mean, sd), seconds.
     pub beat_offset: Option<(f64, f64)>,
+    /// BeatAlign of the same motion against other songs' beats (the chance level).
+    pub mismatched_beat_align: Option<f64>,
     /// Why the row is incomplete, if it is.
     pub problem: Option<String>,
 }
@@ -99,6 +101,24 @@ fn audit_dance(dance: &TangDance, data: &Path) -> AuditRow {
     row.beat_offset = beat_offset(&track, Joint::Hips.index(), &local)
         .ok()
         .map(|o| (o.mean_s, o.sd_s));
+    // Chance level: the same motion against three other songs' beats, each aligned by the same
+    // search as the true song (so the search itself earns neither side anything).
+    let others: Vec<f64> = other_songs(data, &dance.name, 3)
+        .iter()
+        .map(|beats| {
+            let first = beats.first().copied().unwrap_or(0.0);
+            let other = measure_offset_within_beat(&track, beats, first);
+            let shifted: Vec<f64> = beats
+                .iter()
+                .map(|b| b - other.start_s)
+                .filter(|b| *b >= 0.0)
+                .collect();
+            beat_align(&track, &shifted)
+        })
+        .collect();
+    if !others.is_empty() {
+        row.mismatched_beat_align = Some(others.iter().sum::<f64>() / others.len() as f64);
+    }
     if let Some(audio) = &dance.audio {
         let opts = AnalyzeOptions {
             tracker: BeatTrackerKind::Native,
@@ -122,6 +142,34 @@ fn audit_dance(dance: &TangDance, data: &Path) -> AuditRow {
         }
     }
     row
+}
+
+/// Reference beats of up to `n` other songs, taken in name order after `name` (wrapping).
+fn other_songs(data: &Path, name: &str, n: usize) -> Vec<Vec<f64>> {
+    let dir = data.join("tang2018-beats");
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .map(|r| {
+            r.flatten()
+                .filter_map(|e| {
+                    e.file_name()
+                        .to_str()?
+                        .strip_suffix(".beats")
+                        .map(String::from)
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    let start = names.iter().position(|x| x.as_str() > name).unwrap_or(0);
+    names
+        .iter()
+        .cycle()
+        .skip(start)
+        .take(names.len())
+        .filter(|x| x.as_str() != name)
+        .take(n)
+        .filter_map(|x| read_times(&dir.join(format!("{x}.beats"))).ok())
+        .collect()
 }
 
 /// Audits every dance under `data/tang2018` with `jobs` threads; `progress` hears each name.
@@ -171,7 +219,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 /// The audit as a Markdown table with totals.
 pub fn audit_table(rows: &[AuditRow]) -> String {
     let mut s = String::from(
-        "| dance | frames | s | fit err cm | bone spread | offset s | tempo BPM | GT BeatAlign | GT beat offset s (mean ± sd) |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| dance | frames | s | fit err cm | bone spread | offset s | tempo BPM | GT BeatAlign | GT vs other songs | GT beat offset s (mean ± sd) |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         if let Some(p) = &r.problem
@@ -181,7 +229,7 @@ pub fn audit_table(rows: &[AuditRow]) -> String {
             continue;
         }
         s += &format!(
-            "| {} | {} | {:.1} | {:.2} | {:.3} | {} | {} | {} | {} |\n",
+            "| {} | {} | {:.1} | {:.2} | {:.3} | {} | {} | {} | {} | {} |\n",
             r.name,
             r.frames,
             r.seconds,
@@ -190,6 +238,7 @@ pub fn audit_table(rows: &[AuditRow]) -> String {
             opt(r.offset_s, 3),
             opt(r.tempo_bpm, 1),
             opt(r.beat_align, 3),
+            opt(r.mismatched_beat_align, 3),
             r.beat_offset
                 .map_or("–".into(), |(m, sd)| format!("{m:.3} ± {sd:.3}")),
         );
@@ -205,7 +254,7 @@ pub fn audit_table(rows: &[AuditRow]) -> String {
     };
     let frames: usize = ok.iter().map(|r| r.frames).sum();
     s += &format!(
-        "| **all {} dances** ({} with audio) | {} | {:.1} min | {} | {} | | | {} | {} |\n",
+        "| **all {} dances** ({} with audio) | {} | {:.1} min | {} | {} | | | {} | {} | {} |\n",
         ok.len(),
         ok.iter().filter(|r| r.has_audio).count(),
         frames,
@@ -213,6 +262,7 @@ pub fn audit_table(rows: &[AuditRow]) -> String {
         opt(mean(&|r| Some(r.fit_error_cm)), 2),
         opt(mean(&|r| Some(r.bone_spread)), 3),
         opt(mean(&|r| r.beat_align), 3),
+        opt(mean(&|r| r.mismatched_beat_align), 3),
         opt(mean(&|r| r.beat_offset.map(|o| o.0)), 3),
     );
     s
