@@ -134,3 +134,53 @@ fn bad_input_exits_non_zero_naming_the_file() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("no-data"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_fitted_dance_exports_as_bvh_and_scores_against_its_song() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    if !data.join("tang2018/DANCE_W_22").is_dir() {
+        eprintln!("skipping: {} not found", data.display());
+        return;
+    }
+    let dir = scratch("bvh");
+    let out = dir.join("w22.bvh");
+    let run = danced()
+        .args(["bvh", "--dance", "DANCE_W_22", "--data"])
+        .arg(&data)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let text = std::fs::read_to_string(&out).unwrap();
+    assert!(
+        text.starts_with("HIERARCHY")
+            && text.contains("Frames: 1022")
+            && text.contains("Frame Time: 0.04")
+    );
+    let run = danced()
+        .arg("metrics")
+        .arg(&out)
+        .arg("--audio")
+        .arg(data.join("tang2018/DANCE_W_22/audio.mp3"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let ba: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("BeatAlign"))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no BeatAlign in {stdout}"));
+    assert!((0.1..=1.0).contains(&ba), "BeatAlign {ba}");
+    assert!(stdout.contains("freezes     0"), "{stdout}");
+    std::fs::remove_dir_all(&dir).ok();
+}
