@@ -3,7 +3,6 @@
 use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use dsp::BeatTrackerKind;
 use dsp::metrics::{self, BEAT_TOLERANCE_S, ONSET_TOLERANCE_S};
@@ -287,40 +286,24 @@ pub fn run_set(
     jobs: usize,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<ItemScore> {
-    let next = Mutex::new(0usize);
-    let results = Mutex::new(vec![ItemScore::default(); set.items.len()]);
-    std::thread::scope(|s| {
-        for _ in 0..jobs.max(1) {
-            s.spawn(|| {
-                loop {
-                    let i = {
-                        let mut n = next.lock().unwrap_or_else(|e| e.into_inner());
-                        let i = *n;
-                        *n += 1;
-                        i
-                    };
-                    let Some(item) = set.items.get(i) else { break };
-                    let opts = AnalyzeOptions {
-                        tracker,
-                        model_rate: None,
-                        keep_hops: false,
-                        beat_params,
-                    };
-                    let r = match analyze_file(&item.audio, opts, &mut |_, _| {}) {
-                        Ok(a) => score(item, &a),
-                        Err(e) => ItemScore {
-                            name: item.name.clone(),
-                            error: Some(e.to_string()),
-                            ..Default::default()
-                        },
-                    };
-                    progress(&item.name);
-                    results.lock().unwrap_or_else(|e| e.into_inner())[i] = r;
-                }
-            });
-        }
-    });
-    results.into_inner().unwrap_or_else(|e| e.into_inner())
+    crate::pool::parallel_map(&set.items, jobs, |item| {
+        let opts = AnalyzeOptions {
+            tracker,
+            model_rate: None,
+            keep_hops: false,
+            beat_params,
+        };
+        let r = match analyze_file(&item.audio, opts, &mut |_, _| {}) {
+            Ok(a) => score(item, &a),
+            Err(e) => ItemScore {
+                name: item.name.clone(),
+                error: Some(e.to_string()),
+                ..Default::default()
+            },
+        };
+        progress(&item.name);
+        r
+    })
 }
 
 /// Mean of a field over the scores that did not fail.

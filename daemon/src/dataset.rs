@@ -2,7 +2,6 @@
 //! tempo, and the ground truth's own BeatAlign and beat offset (the bar every model is held to).
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use dsp::BeatTrackerKind;
 use glam::Vec3;
@@ -179,37 +178,22 @@ pub fn audit(
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Vec<AuditRow>, model::tang2018::TangError> {
     let dirs: Vec<PathBuf> = dance_dirs(&data.join("tang2018"))?;
-    let rows = Mutex::new(vec![AuditRow::default(); dirs.len()]);
-    let next = Mutex::new(0usize);
-    std::thread::scope(|s| {
-        for _ in 0..jobs.max(1) {
-            s.spawn(|| {
-                loop {
-                    let i = {
-                        let mut n = next.lock().unwrap_or_else(|e| e.into_inner());
-                        *n += 1;
-                        *n - 1
-                    };
-                    let Some(dir) = dirs.get(i) else { break };
-                    let row = match load_dance(dir) {
-                        Ok(d) => audit_dance(&d, data),
-                        Err(e) => AuditRow {
-                            name: dir
-                                .file_name()
-                                .unwrap_or_default()
-                                .to_string_lossy()
-                                .into_owned(),
-                            problem: Some(e.to_string()),
-                            ..Default::default()
-                        },
-                    };
-                    progress(&row.name);
-                    rows.lock().unwrap_or_else(|e| e.into_inner())[i] = row;
-                }
-            });
-        }
-    });
-    Ok(rows.into_inner().unwrap_or_else(|e| e.into_inner()))
+    Ok(crate::pool::parallel_map(&dirs, jobs, |dir| {
+        let row = match load_dance(dir) {
+            Ok(d) => audit_dance(&d, data),
+            Err(e) => AuditRow {
+                name: dir
+                    .file_name()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+                    .into_owned(),
+                problem: Some(e.to_string()),
+                ..Default::default()
+            },
+        };
+        progress(&row.name);
+        row
+    }))
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {

@@ -9,3 +9,4 @@ pub mod demo_track;
 pub mod offline;
 pub mod output;
 pub mod plot;
+pub mod pool;
