@@ -251,3 +251,155 @@ pub fn audit_table(rows: &[AuditRow]) -> String {
     );
     s
 }
+
+/// Version of the `dataset build` file layout; bump it when an array or its meaning changes.
+pub const DATASET_VERSION: u32 = 1;
+
+/// One dance as it enters the training set.
+#[derive(Clone, Debug)]
+pub struct BuiltDance {
+    /// Dance name.
+    pub name: String,
+    /// Style letter (C, R, T, W).
+    pub style: char,
+    /// Train or validation.
+    pub validation: bool,
+    /// Motion features, `[frames][MOTION_FEATURE_DIM]`.
+    pub motion: Vec<model::motion::MotionFeatures>,
+    /// Music features of the same frames, `[frames][FEATURE_DIM]` (empty for motion-only dances).
+    pub music: Vec<[f32; dsp::feature::FEATURE_DIM]>,
+    /// Song time of the first kept frame, seconds (when there is music).
+    pub start_s: Option<f64>,
+    /// Rig fit error, cm.
+    pub fit_error_cm: f64,
+}
+
+/// Deterministic split by dance, stratified by style: within each style, dances sorted by name,
+/// every fifth one from the third (indices 2, 7, 12, …) goes to validation. Styles with fewer
+/// than three dances stay in training.
+pub fn is_validation(name: &str, all_names: &[String]) -> bool {
+    let style = |n: &str| n.strip_prefix("DANCE_").and_then(|s| s.chars().next());
+    let mut same: Vec<&String> = all_names
+        .iter()
+        .filter(|n| style(n) == style(name))
+        .collect();
+    same.sort();
+    same.iter()
+        .position(|n| n.as_str() == name)
+        .is_some_and(|i| i % 5 == 2)
+}
+
+/// Fits, aligns and featurises one dance at the motion's frame rate (25 fps): motion features
+/// from the fitted rig, music features from the *streaming* analysis of the whole song (the
+/// same code the daemon runs), frame i of the motion paired with the music frame at song time
+/// `start + i / 25`. Frames outside the song are dropped.
+pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<BuiltDance, String> {
+    let fit = fit_dance(dance).map_err(|e| e.to_string())?;
+    let mut motion = Vec::new();
+    model::motion::encode(&fit.poses, &mut motion);
+    let mut built = BuiltDance {
+        name: dance.name.clone(),
+        style: dance.style,
+        validation,
+        motion,
+        music: Vec::new(),
+        start_s: None,
+        fit_error_cm: fit.mean_error_cm,
+    };
+    let Some(audio) = &dance.audio else {
+        return Ok(built);
+    };
+    let positions = fitted_positions(&fit);
+    let track = JointTrack::new(&positions, JOINT_COUNT, fit.fps).map_err(|e| e.to_string())?;
+    let reference = data
+        .join("tang2018-beats")
+        .join(format!("{}.beats", dance.name));
+    let music_beats =
+        read_times(&reference).map_err(|e| format!("{}: {e}", reference.display()))?;
+    let nominal = dance.music_span.map_or(0.0, |s| s.0 / TANG_FPS);
+    let start_s = measure_offset_within_beat(&track, &music_beats, nominal).start_s;
+    let opts = AnalyzeOptions {
+        tracker: BeatTrackerKind::Native,
+        model_rate: Some(TANG_FPS),
+        keep_hops: false,
+        beat_params: Default::default(),
+    };
+    let a = analyze_file(audio, opts, &mut |_, _| {}).map_err(|e| e.to_string())?;
+    let first = (start_s * TANG_FPS).round() as i64;
+    let mut keep_from = None;
+    for i in 0..built.motion.len() {
+        let k = first + i as i64;
+        if k < 0 {
+            continue;
+        }
+        let Some(frame) = a.features.get(k as usize) else {
+            break;
+        };
+        keep_from.get_or_insert(i);
+        built.music.push(frame.values);
+    }
+    let from = keep_from.unwrap_or(built.motion.len());
+    built.motion = built.motion[from..from + built.music.len()].to_vec();
+    built.start_s = Some((first + from as i64) as f64 / TANG_FPS);
+    Ok(built)
+}
+
+/// Writes the dances as one `.npz` (arrays `<name>/motion` and, with music, `<name>/music`,
+/// float32) plus a `.json` manifest beside it, both atomically.
+pub fn write_dataset(path: &Path, dances: &[BuiltDance]) -> Result<(), String> {
+    let tmp = path.with_extension(format!("npz.tmp{}", std::process::id()));
+    let write = || -> Result<(), String> {
+        let file = std::fs::File::create(&tmp).map_err(|e| format!("{}: {e}", tmp.display()))?;
+        let mut npz = ndarray_npy::NpzWriter::new(file);
+        for d in dances {
+            let m: Vec<f32> = d.motion.iter().flatten().copied().collect();
+            let m = ndarray::Array2::from_shape_vec(
+                (d.motion.len(), model::motion::MOTION_FEATURE_DIM),
+                m,
+            )
+            .map_err(|e| e.to_string())?;
+            npz.add_array(format!("{}/motion", d.name), &m)
+                .map_err(|e| e.to_string())?;
+            if !d.music.is_empty() {
+                let x: Vec<f32> = d.music.iter().flatten().copied().collect();
+                let x =
+                    ndarray::Array2::from_shape_vec((d.music.len(), dsp::feature::FEATURE_DIM), x)
+                        .map_err(|e| e.to_string())?;
+                npz.add_array(format!("{}/music", d.name), &x)
+                    .map_err(|e| e.to_string())?;
+            }
+        }
+        let file = npz.finish().map_err(|e| e.to_string())?;
+        file.sync_all().map_err(|e| e.to_string())?;
+        std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+    };
+    if let Err(e) = write() {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    let entries: Vec<String> = dances
+        .iter()
+        .map(|d| {
+            format!(
+                "    {{\"name\": \"{}\", \"style\": \"{}\", \"split\": \"{}\", \"frames\": {}, \"music\": {}, \"start_s\": {}, \"fit_error_cm\": {:.3}}}",
+                d.name,
+                d.style,
+                if d.validation { "validation" } else { "train" },
+                d.motion.len(),
+                !d.music.is_empty(),
+                d.start_s.map_or("null".to_string(), |s| format!("{s:.3}")),
+                d.fit_error_cm
+            )
+        })
+        .collect();
+    let manifest = format!(
+        "{{\n  \"dataset_version\": {DATASET_VERSION},\n  \"source\": \"tang2018 (Tang, Jia & Mao 2018)\",\n  \"fps\": {TANG_FPS},\n  \"motion_layout_version\": {},\n  \"motion_dim\": {},\n  \"music_layout_version\": {},\n  \"music_dim\": {},\n  \"dances\": [\n{}\n  ]\n}}\n",
+        model::motion::MOTION_LAYOUT_VERSION,
+        model::motion::MOTION_FEATURE_DIM,
+        dsp::feature::FEATURE_LAYOUT_VERSION,
+        dsp::feature::FEATURE_DIM,
+        entries.join(",\n")
+    );
+    crate::output::write_atomic(&path.with_extension("json"), manifest.as_bytes())
+        .map_err(|e| format!("{}: {e}", path.with_extension("json").display()))
+}

@@ -63,6 +63,19 @@ enum Command {
 
 #[derive(Subcommand, Debug)]
 enum DatasetCommand {
+    /// Every dance → motion features on the rig plus the streaming music features of its song,
+    /// aligned, at 25 fps, split by dance into train/validation; one .npz + a .json manifest.
+    Build {
+        /// The shared data folder (holds tang2018/ and tang2018-beats/).
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Output .npz file (a .json manifest is written beside it).
+        #[arg(long)]
+        out: PathBuf,
+        /// Worker threads.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+    },
     /// One row per dance: frames, seconds, rig fit error, bone-length spread, measured music
     /// offset, tempo, and the ground truth's BeatAlign and beat offset.
     Audit {
@@ -161,6 +174,9 @@ fn main() -> Result<()> {
         Command::Dataset {
             what: DatasetCommand::Audit { data, jobs },
         } => dataset_audit(&data, jobs),
+        Command::Dataset {
+            what: DatasetCommand::Build { data, out, jobs },
+        } => dataset_build(&data, &out, jobs),
         Command::Bvh { dance, out, data } => export_dance(&data, &dance, &out),
         Command::Metrics { bvh, audio, offset } => motion_metrics(&bvh, &audio, offset),
     }
@@ -532,5 +548,85 @@ fn motion_metrics(bvh_path: &std::path::Path, audio: &std::path::Path, offset: f
         s.mean_speed_mps,
         100.0 * s.contact_fraction
     );
+    Ok(())
+}
+
+fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> Result<()> {
+    let root = data.join("tang2018");
+    let dirs = model::tang2018::dance_dirs(&root)
+        .with_context(|| format!("reading {}", root.display()))?;
+    let names: Vec<String> = dirs
+        .iter()
+        .map(|d| {
+            d.file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    let pb = ProgressBar::new(dirs.len() as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let started = Instant::now();
+    let results = daemon::pool::parallel_map(&dirs, jobs, |dir| {
+        let name = dir
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
+        let r = model::tang2018::load_dance(dir)
+            .map_err(|e| e.to_string())
+            .and_then(|d| {
+                daemon::dataset::build_dance(
+                    &d,
+                    data,
+                    daemon::dataset::is_validation(&name, &names),
+                )
+            });
+        pb.set_message(name.clone());
+        pb.inc(1);
+        (name, r)
+    });
+    pb.finish_and_clear();
+    let mut built = Vec::new();
+    let mut skipped = Vec::new();
+    for (name, r) in results {
+        match r {
+            Ok(d) => built.push(d),
+            Err(e) => skipped.push(format!("{name}: {e}")),
+        }
+    }
+    if built.is_empty() {
+        bail!("no dance could be built from {}", root.display());
+    }
+    daemon::dataset::write_dataset(out, &built).map_err(anyhow::Error::msg)?;
+    let frames = |v: bool| {
+        built
+            .iter()
+            .filter(|d| d.validation == v)
+            .map(|d| d.motion.len())
+            .sum::<usize>()
+    };
+    let with_music = built.iter().filter(|d| !d.music.is_empty()).count();
+    println!(
+        "wrote {} ({} dances, {} with music; train {} frames, validation {} frames: {}) in {:.1} s",
+        out.display(),
+        built.len(),
+        with_music,
+        frames(false),
+        frames(true),
+        built
+            .iter()
+            .filter(|d| d.validation)
+            .map(|d| d.name.as_str())
+            .collect::<Vec<_>>()
+            .join(" "),
+        started.elapsed().as_secs_f64()
+    );
+    for s in &skipped {
+        eprintln!("skipped {s}");
+    }
     Ok(())
 }
