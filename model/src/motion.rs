@@ -378,13 +378,7 @@ mod tests {
         out
     }
 
-    fn same_rotation(a: Quat, b: Quat, eps: f32) -> bool {
-        let b = if a.dot(b) < 0.0 { -b } else { b };
-        (glam::Vec4::from(a) - glam::Vec4::from(b))
-            .abs()
-            .max_element()
-            <= eps
-    }
+    use crate::rotation::tests::same_rotation;
 
     fn assert_poses_close(a: &[Pose], b: &[Pose]) {
         assert_eq!(a.len(), b.len());

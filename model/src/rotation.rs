@@ -223,14 +223,14 @@ fn unit_f64(v: Vec3) -> Option<DVec3> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use proptest::prelude::*;
     use std::f32::consts::{FRAC_PI_2, PI};
 
     const EPS: f32 = 1e-5;
 
-    fn same_rotation(a: Quat, b: Quat, eps: f32) -> bool {
+    pub(crate) fn same_rotation(a: Quat, b: Quat, eps: f32) -> bool {
         let b = if a.dot(b) < 0.0 { -b } else { b };
         (glam::Vec4::from(a) - glam::Vec4::from(b))
             .abs()

@@ -157,13 +157,16 @@ fn vec3(v: &serde_json::Value, path: &Path) -> Result<Vec3, TangError> {
     finite(Vec3::new(f(0)?, f(1)?, f(2)?), path)
 }
 
-fn from_json(path: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), TangError> {
+fn read_json(path: &Path) -> Result<serde_json::Value, TangError> {
     let text = fs::read_to_string(path).map_err(|source| TangError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| malformed(path, format!("invalid JSON: {e}")))?;
+    serde_json::from_str(&text).map_err(|e| malformed(path, format!("invalid JSON: {e}")))
+}
+
+fn from_json(path: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), TangError> {
+    let v = read_json(path)?;
     let skel = v
         .get("skeletons")
         .and_then(|s| s.as_array())
@@ -205,12 +208,7 @@ fn read_span(path: &Path) -> Result<Option<(f64, f64)>, TangError> {
     if !path.exists() {
         return Ok(None);
     }
-    let text = fs::read_to_string(path).map_err(|source| TangError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| malformed(path, format!("invalid JSON: {e}")))?;
+    let v = read_json(path)?;
     let get = |k: &str| {
         v.get(k)
             .and_then(|x| x.as_f64())
