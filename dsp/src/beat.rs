@@ -107,7 +107,8 @@ impl BeatTrackerParams {
 pub struct BeatState {
     /// Tempo in beats per minute (0 until the tracker has locked on).
     pub tempo_bpm: f64,
-    /// Share of the tempo posterior within ±4 % of `tempo_bpm`, in [0, 1].
+    /// Confidence in [0, 1]: the tempo posterior's share within ±4 % of `tempo_bpm`, scaled by
+    /// how salient the onsets on the tracked beats are; 0 while no beat is heard.
     pub tempo_confidence: f64,
     /// Position in the current beat, in [0, 1): 0 on the beat.
     pub beat_phase: f64,
@@ -371,7 +372,15 @@ impl BeatTracker {
             } else {
                 0.0
             },
-            tempo_confidence: near.clamp(0.0, 1.0),
+            // The tempo posterior alone is nearly always peaked (tempo changes are expensive), so
+            // the confidence also says how clearly the onsets mark the beats: 0 while unlocked,
+            // 1 once the beat onsets stand at twice the salience gate.
+            tempo_confidence: if locked {
+                near.clamp(0.0, 1.0)
+                    * (self.salience / (2.0 * self.params.salience_gate)).clamp(0.0, 1.0) as f64
+            } else {
+                0.0
+            },
             beat_phase: phase,
             frames_to_next_beat: (iv - pos) as f64,
             beat_frames_ago,
@@ -416,6 +425,11 @@ mod tests {
             }
             let st = bt.state();
             assert!(
+                st.tempo_confidence > 0.5,
+                "bpm {bpm}: confidence {}",
+                st.tempo_confidence
+            );
+            assert!(
                 (st.tempo_bpm - bpm).abs() / bpm < 0.02,
                 "bpm {bpm}: got {}",
                 st.tempo_bpm
@@ -442,7 +456,8 @@ mod tests {
         let fps = crate::hop_rate();
         let mut bt = BeatTracker::new(fps);
         for _ in 0..(20.0 * fps) as usize {
-            assert!(bt.process(0.0, 0.0).beat_frames_ago.is_none());
+            let st = bt.process(0.0, 0.0);
+            assert!(st.beat_frames_ago.is_none() && st.tempo_confidence == 0.0);
         }
         // Stationary noise: the full-band flux is steady (many bands averaged), the few bass
         // bins fluctuate wildly.
