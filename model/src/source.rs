@@ -1,0 +1,62 @@
+//! The interface every motion generator behind the daemon implements: retrieval today, the
+//! neural model later.
+//!
+//! The trait is shaped by the live setting. Music arrives one feature frame at a time and the
+//! character must move *now*, so generation is per-frame and causal: [`MotionSource::step`]
+//! sees the current music frame plus a fixed, declared look-ahead ([`MotionSource::lookahead_frames`],
+//! which the caller pays for as latency) and never the rest of the song. The performer's
+//! controls ([`Controls`]: temperature, an optional key pose to hit) are passed with every
+//! frame, because they change live and a source must react on the next frame without being
+//! rebuilt. A source is built once (loading clips or weights is the slow, allocating part) and
+//! `step` then writes into a caller-owned [`Pose`] without allocating, so it can run on a
+//! real-time thread. [`MotionSource::reset`] starts a new performance with a seed, which makes
+//! any randomness reproducible.
+
+use dsp::feature::FEATURE_DIM;
+use glam::Quat;
+
+use crate::rig::{JOINT_COUNT, Pose};
+
+/// A pose the performer asks the dancer to reach at a given moment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KeyPoseTarget {
+    /// Target local rotation of every joint (the hips' heading is taken relative to the dancer's own; root translation is ignored).
+    pub rotations: [Quat; JOINT_COUNT],
+    /// Frames left until the pose must be reached (0 = this frame).
+    pub frames_to_go: u32,
+}
+
+/// Live controls passed with every frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Controls {
+    /// Randomness of the choices: 0 = always the most likely motion, higher = more varied.
+    pub temperature: f32,
+    /// A key pose to reach, if any.
+    pub key_pose: Option<KeyPoseTarget>,
+}
+
+impl Default for Controls {
+    /// Deterministic choices and no key pose.
+    fn default() -> Self {
+        Controls {
+            temperature: 0.0,
+            key_pose: None,
+        }
+    }
+}
+
+/// A streaming, causal motion generator driven by music feature frames.
+pub trait MotionSource {
+    /// Output frames per second; `step` must be called once per frame at this rate.
+    fn frame_rate(&self) -> f64;
+
+    /// Music frames needed beyond the current one in every `step` call.
+    fn lookahead_frames(&self) -> usize;
+
+    /// Produces the next pose from the current music frame (`music[0]`), its look-ahead
+    /// (`music[1..]`) and the live controls; never allocates.
+    fn step(&mut self, music: &[[f32; FEATURE_DIM]], controls: &Controls, out: &mut Pose);
+
+    /// Starts a new performance from scratch, seeding any randomness with `seed`.
+    fn reset(&mut self, seed: u64);
+}
