@@ -30,6 +30,30 @@ enum Command {
         #[command(subcommand)]
         what: BenchCommand,
     },
+    /// Dance to a song offline through the streaming analysis and write the motion as BVH.
+    Generate {
+        /// The song.
+        #[arg(long)]
+        audio: PathBuf,
+        /// Output BVH file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Motion source (only the retrieval dancer exists so far).
+        #[arg(long, default_value = "retrieval")]
+        source: String,
+        /// Stop after this many seconds of audio.
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Sampling temperature (0: always the best-matching clip).
+        #[arg(long, default_value_t = 0.5)]
+        temperature: f32,
+        /// Random seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The shared data folder the clip library is cut from (training split of tang2018).
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+    },
     /// Export a tang2018 dance, fitted to the rig, as BVH.
     Bvh {
         /// Dance folder name, e.g. DANCE_W_1.
@@ -178,6 +202,15 @@ fn main() -> Result<()> {
             what: DatasetCommand::Build { data, out, jobs },
         } => dataset_build(&data, &out, jobs),
         Command::Bvh { dance, out, data } => export_dance(&data, &dance, &out),
+        Command::Generate {
+            audio,
+            out,
+            source,
+            seconds,
+            temperature,
+            seed,
+            data,
+        } => generate(&audio, &out, &source, seconds, temperature, seed, &data),
         Command::Metrics { bvh, audio, offset } => motion_metrics(&bvh, &audio, offset),
     }
 }
@@ -628,5 +661,91 @@ fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> 
     for s in &skipped {
         eprintln!("skipped {s}");
     }
+    Ok(())
+}
+
+fn generate(
+    audio: &std::path::Path,
+    out: &std::path::Path,
+    source: &str,
+    seconds: Option<f64>,
+    temperature: f32,
+    seed: u64,
+    data: &std::path::Path,
+) -> Result<()> {
+    use model::source::{Controls, MotionSource};
+    if source != "retrieval" {
+        bail!("unknown motion source {source:?} (available: retrieval)");
+    }
+    let started = Instant::now();
+    // The clip library is cut from the training split at start-up; a compact shipped library
+    // replaces this step later.
+    let root = data.join("tang2018");
+    let dirs = model::tang2018::dance_dirs(&root)
+        .with_context(|| format!("reading {} (the clip library's source)", root.display()))?;
+    let names: Vec<String> = dirs
+        .iter()
+        .map(|d| {
+            d.file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    let train: Vec<_> = dirs
+        .iter()
+        .zip(&names)
+        .filter(|(_, n)| !daemon::dataset::is_validation(n, &names))
+        .map(|(d, _)| d.clone())
+        .collect();
+    let built = daemon::pool::parallel_map(&train, 2, |dir| {
+        let dance = model::tang2018::load_dance(dir).ok()?;
+        dance.audio.as_ref()?;
+        let b = daemon::dataset::build_dance(&dance, data, false).ok()?;
+        let mut poses = Vec::new();
+        model::motion::decode(&b.motion, model::motion::RootState::ORIGIN, &mut poses);
+        Some((poses, b.music))
+    });
+    let dances: Vec<_> = built.into_iter().flatten().collect();
+    let mut dancer = model::retrieval::RetrievalDancer::from_dances(&dances, seed)
+        .context("building the clip library")?;
+    let library_s = started.elapsed().as_secs_f64();
+    let opts = AnalyzeOptions {
+        tracker: BeatTrackerKind::Native,
+        model_rate: Some(dancer.frame_rate()),
+        keep_hops: false,
+        beat_params: Default::default(),
+    };
+    let a = analyze_file(audio, opts, &mut |_, _| {})
+        .with_context(|| format!("analysing {}", audio.display()))?;
+    let controls = Controls {
+        temperature,
+        key_pose: None,
+    };
+    let limit = seconds.map_or(usize::MAX, |s| (s * dancer.frame_rate()) as usize);
+    let mut pose = model::rig::Pose::rest();
+    let mut poses = Vec::with_capacity(a.features.len().min(limit));
+    let step_start = Instant::now();
+    for f in a.features.iter().take(limit) {
+        dancer.step(std::slice::from_ref(&f.values), &controls, &mut pose);
+        poses.push(pose);
+    }
+    let step_s = step_start.elapsed().as_secs_f64();
+    let skeleton = model::rig::Skeleton::default_adult();
+    model::bvh::export(&skeleton, &poses, dancer.frame_rate())
+        .write(out)
+        .with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "{}: {} frames ({:.1} s) at {} fps from {} clips of {} dances → {} (library {:.1} s, {:.1} µs per frame)",
+        audio.display(),
+        poses.len(),
+        poses.len() as f64 / dancer.frame_rate(),
+        dancer.frame_rate(),
+        dancer.library().clips.len(),
+        dances.len(),
+        out.display(),
+        library_s,
+        1e6 * step_s / poses.len().max(1) as f64
+    );
     Ok(())
 }

@@ -184,3 +184,37 @@ fn a_fitted_dance_exports_as_bvh_and_scores_against_its_song() {
     assert!(stdout.contains("freezes     0"), "{stdout}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn generate_dances_to_a_song_and_writes_bvh() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    if !data.join("tang2018").is_dir() {
+        eprintln!("skipping: {} not found", data.display());
+        return;
+    }
+    let dir = scratch("generate");
+    let out = dir.join("gen.bvh");
+    let run = danced()
+        .arg("generate")
+        .arg("--audio")
+        .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
+        .arg("--out")
+        .arg(&out)
+        .args(["--seconds", "10", "--data"])
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let bvh = model::bvh::Bvh::read(&out).unwrap();
+    assert_eq!(bvh.frames.len(), 250);
+    assert!(bvh.frames.iter().flatten().all(|v| v.is_finite()));
+    // The dancer moves: the hips' world positions are not all the same.
+    let first = bvh.world_positions(0);
+    let last = bvh.world_positions(249);
+    assert!((first[0] - last[0]).length() > 1.0, "hips did not move");
+    std::fs::remove_dir_all(&dir).ok();
+}
