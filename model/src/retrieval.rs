@@ -34,6 +34,8 @@ const W_TEMPO: f32 = 4.0;
 const W_ENERGY: f32 = 1.0;
 /// Weight of bar-position mismatch, per half bar.
 const W_BAR: f32 = 0.5;
+/// Cost weight of a clip moving less than the library's typical clip (0 to 1 of it).
+const W_STILL: f32 = 4.0;
 /// Weight of the distance from a candidate's last pose to the key pose, per unit of Σ(1 − |dot|).
 const W_KEY: f32 = 20.0;
 /// Duration of the offset decay at a clip switch, seconds.
@@ -68,6 +70,9 @@ pub struct Clip {
     pub phase_start: f32,
     /// Beat phase at the last frame (just after the next wrap), [0, 1).
     pub phase_end: f32,
+    /// How much the clip moves: mean over frames of Σ_joints (1 − |dot|) between consecutive
+    /// local rotations.
+    pub motion: f32,
 }
 
 /// One-beat clips cut from training dances, stored relative to their first frame.
@@ -77,6 +82,8 @@ pub struct ClipLibrary {
     pub poses: Vec<Pose>,
     /// The clips.
     pub clips: Vec<Clip>,
+    /// Median [`Clip::motion`] over the library: what "moving normally" means for these dances.
+    pub typical_motion: f32,
 }
 
 /// Beat (or bar) phase in [0, 1) from its sine and cosine; `None` when not finite or undefined.
@@ -123,6 +130,7 @@ impl ClipLibrary {
         let mut lib = ClipLibrary {
             poses: Vec::new(),
             clips: Vec::new(),
+            typical_motion: 0.0,
         };
         let mut phases = Vec::new();
         let mut wraps = Vec::new();
@@ -152,6 +160,9 @@ impl ClipLibrary {
                 lib.push_clip(&poses[s..=e], &music[s..=e], phases[s], phases[e]);
             }
         }
+        let mut motions: Vec<f32> = lib.clips.iter().map(|c| c.motion).collect();
+        motions.sort_by(f32::total_cmp);
+        lib.typical_motion = motions.get(motions.len() / 2).copied().unwrap_or(0.0);
         lib
     }
 
@@ -202,6 +213,20 @@ impl ClipLibrary {
             music[0][FeatureLayout::BAR_COS],
         )
         .unwrap_or(0.0);
+        let motion = poses
+            .windows(2)
+            .map(|w| {
+                (0..JOINT_COUNT)
+                    .map(|j| {
+                        1.0 - w[0].local_rotations[j]
+                            .dot(w[1].local_rotations[j])
+                            .abs()
+                            .min(1.0)
+                    })
+                    .sum::<f32>()
+            })
+            .sum::<f32>()
+            / len as f32;
         self.clips.push(Clip {
             start,
             len,
@@ -210,6 +235,7 @@ impl ClipLibrary {
             bar_phase,
             phase_start,
             phase_end,
+            motion,
         });
     }
 
@@ -406,6 +432,11 @@ impl RetrievalDancer {
             c += W_ENERGY * (clip.energy - self.energy).abs() / 10.0;
         }
         c += W_BAR * 2.0 * circular_distance(clip.bar_phase, self.bar_phase);
+        // Continuity alone favours clips that barely move (their first pose is close to anything
+        // still), which makes the dancer freeze: clips quieter than the library's typical one pay.
+        if lib.typical_motion > 0.0 {
+            c += W_STILL * (1.0 - clip.motion / lib.typical_motion).max(0.0);
+        }
         if let Some(k) = key {
             c +=
                 W_KEY * pose_distance(&k.rotations, key_hips, &lib.last_pose(clip).local_rotations);
