@@ -3,8 +3,6 @@
 
 use std::path::{Path, PathBuf};
 
-use dsp::BeatTrackerKind;
-use glam::Vec3;
 use model::alignment::measure_offset_within_beat;
 use model::metrics::{JointTrack, beat_align, beat_offset};
 use model::rig::{JOINT_COUNT, Joint};
@@ -43,15 +41,48 @@ pub struct AuditRow {
     pub problem: Option<String>,
 }
 
-/// World joint positions of a fitted dance, flattened frame by frame.
-pub fn fitted_positions(fit: &model::tang_fit::TangFit) -> Vec<Vec3> {
-    let mut out = Vec::with_capacity(fit.poses.len() * JOINT_COUNT);
-    let mut frame = [Vec3::ZERO; JOINT_COUNT];
-    for pose in &fit.poses {
-        fit.skeleton.world_positions(pose, &mut frame);
-        out.extend_from_slice(&frame);
-    }
-    out
+/// Where a dance sits in its song: the reference beats and the measured start.
+struct Alignment {
+    music_beats: Vec<f64>,
+    estimate: model::alignment::OffsetEstimate,
+}
+
+/// Reads the dance's reference beats and measures its start within half a beat of the nominal
+/// `start_position` (both `dataset audit` and `dataset build` use exactly this alignment).
+fn align(dance: &TangDance, track: &JointTrack<'_>, data: &Path) -> Result<Alignment, String> {
+    let reference = data
+        .join("tang2018-beats")
+        .join(format!("{}.beats", dance.name));
+    let music_beats = read_times(&reference)
+        .map_err(|e| format!("no reference beats ({}: {e})", reference.display()))?;
+    let nominal = dance.music_span.map_or(0.0, |s| s.0 / TANG_FPS);
+    let estimate = measure_offset_within_beat(track, &music_beats, nominal);
+    Ok(Alignment {
+        music_beats,
+        estimate,
+    })
+}
+
+/// Every dance folder under `data/tang2018` with its name and whether it is in the validation
+/// split, in name order.
+pub fn dances_with_split(
+    data: &Path,
+) -> Result<Vec<(PathBuf, String, bool)>, model::tang2018::TangError> {
+    let dirs = dance_dirs(&data.join("tang2018"))?;
+    let names: Vec<String> = dirs
+        .iter()
+        .map(|d| {
+            d.file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    Ok(dirs
+        .into_iter()
+        .zip(&names)
+        .map(|(dir, name)| (dir, name.clone(), is_validation(name, &names)))
+        .collect())
 }
 
 fn audit_dance(dance: &TangDance, data: &Path) -> AuditRow {
@@ -71,7 +102,7 @@ fn audit_dance(dance: &TangDance, data: &Path) -> AuditRow {
     };
     row.fit_error_cm = fit.mean_error_cm;
     row.bone_spread = fit.bone_length_spread;
-    let positions = fitted_positions(&fit);
+    let positions = fit.skeleton.trajectory(&fit.poses);
     let Ok(track) = JointTrack::new(&positions, JOINT_COUNT, fit.fps) else {
         row.problem = Some("fitted motion is not finite".into());
         return row;
@@ -80,15 +111,13 @@ fn audit_dance(dance: &TangDance, data: &Path) -> AuditRow {
         // Motion only: the data set has no song for this dance, so no music-side numbers.
         return row;
     }
-    let reference = data
-        .join("tang2018-beats")
-        .join(format!("{}.beats", dance.name));
-    let Ok(music) = read_times(&reference) else {
-        row.problem = Some(format!("no reference beats ({})", reference.display()));
-        return row;
+    let (music, est) = match align(dance, &track, data) {
+        Ok(a) => (a.music_beats, a.estimate),
+        Err(e) => {
+            row.problem = Some(e);
+            return row;
+        }
     };
-    let nominal = dance.music_span.map_or(0.0, |s| s.0 / TANG_FPS);
-    let est = measure_offset_within_beat(&track, &music, nominal);
     row.offset_s = Some(est.offset_s);
     // Music beats in motion time, for the metrics.
     let local: Vec<f64> = music
@@ -119,12 +148,7 @@ fn audit_dance(dance: &TangDance, data: &Path) -> AuditRow {
         row.mismatched_beat_align = Some(others.iter().sum::<f64>() / others.len() as f64);
     }
     if let Some(audio) = &dance.audio {
-        let opts = AnalyzeOptions {
-            tracker: BeatTrackerKind::Native,
-            model_rate: None,
-            keep_hops: false,
-            beat_params: Default::default(),
-        };
+        let opts = AnalyzeOptions::native(None);
         match analyze_file(audio, opts, &mut |_, _| {}) {
             Ok(a) => {
                 let end = est.start_s + dance.seconds();
@@ -177,8 +201,8 @@ pub fn audit(
     jobs: usize,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Vec<AuditRow>, model::tang2018::TangError> {
-    let dirs: Vec<PathBuf> = dance_dirs(&data.join("tang2018"))?;
-    Ok(crate::pool::parallel_map(&dirs, jobs, |dir| {
+    let dances = dances_with_split(data)?;
+    Ok(crate::pool::parallel_map(&dances, jobs, |(dir, _, _)| {
         let row = match load_dance(dir) {
             Ok(d) => audit_dance(&d, data),
             Err(e) => AuditRow {
@@ -309,21 +333,10 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
     let Some(audio) = &dance.audio else {
         return Ok(built);
     };
-    let positions = fitted_positions(&fit);
+    let positions = fit.skeleton.trajectory(&fit.poses);
     let track = JointTrack::new(&positions, JOINT_COUNT, fit.fps).map_err(|e| e.to_string())?;
-    let reference = data
-        .join("tang2018-beats")
-        .join(format!("{}.beats", dance.name));
-    let music_beats =
-        read_times(&reference).map_err(|e| format!("{}: {e}", reference.display()))?;
-    let nominal = dance.music_span.map_or(0.0, |s| s.0 / TANG_FPS);
-    let start_s = measure_offset_within_beat(&track, &music_beats, nominal).start_s;
-    let opts = AnalyzeOptions {
-        tracker: BeatTrackerKind::Native,
-        model_rate: Some(TANG_FPS),
-        keep_hops: false,
-        beat_params: Default::default(),
-    };
+    let start_s = align(dance, &track, data)?.estimate.start_s;
+    let opts = AnalyzeOptions::native(Some(TANG_FPS));
     let a = analyze_file(audio, opts, &mut |_, _| {}).map_err(|e| e.to_string())?;
     let first = (start_s * TANG_FPS).round() as i64;
     let mut keep_from = None;

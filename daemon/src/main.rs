@@ -228,6 +228,16 @@ fn progress_bar(hidden: bool) -> ProgressBar {
     pb
 }
 
+/// A bar counting finished items, with the current one's name as its message.
+fn count_bar(len: u64) -> ProgressBar {
+    let pb = ProgressBar::new(len);
+    pb.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    pb
+}
+
 fn analyze(args: AnalyzeArgs) -> Result<()> {
     let started = Instant::now();
     let pb = progress_bar(false);
@@ -378,11 +388,7 @@ fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
         .with_overrides(&args.beat_params)
         .map_err(anyhow::Error::msg)?;
     let total: usize = sets.iter().map(|s| s.items.len()).sum::<usize>() * trackers.len();
-    let pb = ProgressBar::new(total as u64);
-    pb.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let pb = count_bar(total as u64);
     let mut rows = Vec::new();
     let mut details = String::new();
     for &tracker in &trackers {
@@ -457,10 +463,8 @@ fn dataset_audit(data: &std::path::Path, jobs: usize) -> Result<()> {
             data.join("tang2018").display()
         );
     }
-    let pb = ProgressBar::new(43);
-    pb.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    let pb = count_bar(
+        model::tang2018::dance_dirs(&data.join("tang2018")).map_or(0, |d| d.len() as u64),
     );
     let started = Instant::now();
     let rows = daemon::dataset::audit(data, jobs, &|name| {
@@ -507,19 +511,9 @@ fn motion_metrics(bvh_path: &std::path::Path, audio: &std::path::Path, offset: f
     let skeleton = Skeleton::default_adult();
     let motion = model::bvh::retarget(&bvh, &skeleton, &Default::default())
         .with_context(|| format!("retargeting {} onto the rig", bvh_path.display()))?;
-    let mut positions = Vec::with_capacity(motion.poses.len() * JOINT_COUNT);
-    let mut frame = [glam::Vec3::ZERO; JOINT_COUNT];
-    for p in &motion.poses {
-        skeleton.world_positions(p, &mut frame);
-        positions.extend_from_slice(&frame);
-    }
+    let positions = skeleton.trajectory(&motion.poses);
     let track = JointTrack::new(&positions, JOINT_COUNT, motion.fps)?;
-    let opts = AnalyzeOptions {
-        tracker: BeatTrackerKind::Native,
-        model_rate: None,
-        keep_hops: false,
-        beat_params: Default::default(),
-    };
+    let opts = AnalyzeOptions::native(None);
     let a = analyze_file(audio, opts, &mut |_, _| {})
         .with_context(|| format!("analysing {}", audio.display()))?;
     let beats: Vec<f64> = a
@@ -585,42 +579,17 @@ fn motion_metrics(bvh_path: &std::path::Path, audio: &std::path::Path, offset: f
 }
 
 fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> Result<()> {
-    let root = data.join("tang2018");
-    let dirs = model::tang2018::dance_dirs(&root)
-        .with_context(|| format!("reading {}", root.display()))?;
-    let names: Vec<String> = dirs
-        .iter()
-        .map(|d| {
-            d.file_name()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned()
-        })
-        .collect();
-    let pb = ProgressBar::new(dirs.len() as u64);
-    pb.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let dances = daemon::dataset::dances_with_split(data)
+        .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
+    let pb = count_bar(dances.len() as u64);
     let started = Instant::now();
-    let results = daemon::pool::parallel_map(&dirs, jobs, |dir| {
-        let name = dir
-            .file_name()
-            .unwrap_or_default()
-            .to_string_lossy()
-            .into_owned();
+    let results = daemon::pool::parallel_map(&dances, jobs, |(dir, name, validation)| {
         let r = model::tang2018::load_dance(dir)
             .map_err(|e| e.to_string())
-            .and_then(|d| {
-                daemon::dataset::build_dance(
-                    &d,
-                    data,
-                    daemon::dataset::is_validation(&name, &names),
-                )
-            });
+            .and_then(|d| daemon::dataset::build_dance(&d, data, *validation));
         pb.set_message(name.clone());
         pb.inc(1);
-        (name, r)
+        (name.clone(), r)
     });
     pb.finish_and_clear();
     let mut built = Vec::new();
@@ -632,7 +601,10 @@ fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> 
         }
     }
     if built.is_empty() {
-        bail!("no dance could be built from {}", root.display());
+        bail!(
+            "no dance could be built from {}",
+            data.join("tang2018").display()
+        );
     }
     daemon::dataset::write_dataset(out, &built).map_err(anyhow::Error::msg)?;
     let frames = |v: bool| {
@@ -680,23 +652,16 @@ fn generate(
     let started = Instant::now();
     // The clip library is cut from the training split at start-up; a compact shipped library
     // replaces this step later.
-    let root = data.join("tang2018");
-    let dirs = model::tang2018::dance_dirs(&root)
-        .with_context(|| format!("reading {} (the clip library's source)", root.display()))?;
-    let names: Vec<String> = dirs
-        .iter()
-        .map(|d| {
-            d.file_name()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned()
-        })
-        .collect();
-    let train: Vec<_> = dirs
-        .iter()
-        .zip(&names)
-        .filter(|(_, n)| !daemon::dataset::is_validation(n, &names))
-        .map(|(d, _)| d.clone())
+    let dances = daemon::dataset::dances_with_split(data).with_context(|| {
+        format!(
+            "reading {} (the clip library's source)",
+            data.join("tang2018").display()
+        )
+    })?;
+    let train: Vec<_> = dances
+        .into_iter()
+        .filter(|(_, _, validation)| !validation)
+        .map(|(dir, _, _)| dir)
         .collect();
     let built = daemon::pool::parallel_map(&train, 2, |dir| {
         let dance = model::tang2018::load_dance(dir).ok()?;
@@ -710,12 +675,7 @@ fn generate(
     let mut dancer = model::retrieval::RetrievalDancer::from_dances(&dances, seed)
         .context("building the clip library")?;
     let library_s = started.elapsed().as_secs_f64();
-    let opts = AnalyzeOptions {
-        tracker: BeatTrackerKind::Native,
-        model_rate: Some(dancer.frame_rate()),
-        keep_hops: false,
-        beat_params: Default::default(),
-    };
+    let opts = AnalyzeOptions::native(Some(dancer.frame_rate()));
     let a = analyze_file(audio, opts, &mut |_, _| {})
         .with_context(|| format!("analysing {}", audio.display()))?;
     let controls = Controls {

@@ -77,8 +77,8 @@ impl FileAnalysis {
     }
 }
 
-/// Options for [`analyze_file`].
-#[derive(Clone, Copy, Debug)]
+/// Options for [`analyze_file`]. The default is the native tracker, no features, no hops.
+#[derive(Clone, Copy, Debug, Default)]
 pub struct AnalyzeOptions {
     /// Beat tracker.
     pub tracker: BeatTrackerKind,
@@ -88,6 +88,16 @@ pub struct AnalyzeOptions {
     pub keep_hops: bool,
     /// Tuning of the native beat tracker.
     pub beat_params: dsp::beat::BeatTrackerParams,
+}
+
+impl AnalyzeOptions {
+    /// The native tracker with default tuning, producing feature frames at `model_rate` if given.
+    pub fn native(model_rate: Option<f64>) -> Self {
+        Self {
+            model_rate,
+            ..Self::default()
+        }
+    }
 }
 
 /// Why a file could not be analysed.

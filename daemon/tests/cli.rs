@@ -7,6 +7,17 @@ fn danced() -> Command {
     Command::new(env!("CARGO_BIN_EXE_danced"))
 }
 
+/// `../shared/data` beside the repository, or `None` (with a message) when `needed` is absent.
+fn shared_data(needed: &str) -> Option<PathBuf> {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    if data.join(needed).is_dir() {
+        Some(data)
+    } else {
+        eprintln!("skipping: {} not found", data.join(needed).display());
+        None
+    }
+}
+
 fn scratch(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("danced-cli-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
@@ -137,11 +148,9 @@ fn bad_input_exits_non_zero_naming_the_file() {
 
 #[test]
 fn a_fitted_dance_exports_as_bvh_and_scores_against_its_song() {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    if !data.join("tang2018/DANCE_W_22").is_dir() {
-        eprintln!("skipping: {} not found", data.display());
+    let Some(data) = shared_data("tang2018/DANCE_W_22") else {
         return;
-    }
+    };
     let dir = scratch("bvh");
     let out = dir.join("w22.bvh");
     let run = danced()
@@ -187,11 +196,9 @@ fn a_fitted_dance_exports_as_bvh_and_scores_against_its_song() {
 
 #[test]
 fn generate_dances_to_a_song_and_writes_bvh() {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    if !data.join("tang2018").is_dir() {
-        eprintln!("skipping: {} not found", data.display());
+    let Some(data) = shared_data("tang2018") else {
         return;
-    }
+    };
     let dir = scratch("generate");
     let out = dir.join("gen.bvh");
     let run = danced()

@@ -402,6 +402,18 @@ impl Skeleton {
         self.forward_kinematics(pose, out, &mut rotations);
     }
 
+    /// World positions of every joint for a whole motion, frame after frame (`poses.len() ×
+    /// JOINT_COUNT` values), the layout the dance metrics take.
+    pub fn trajectory(&self, poses: &[Pose]) -> Vec<Vec3> {
+        let mut out = Vec::with_capacity(poses.len() * JOINT_COUNT);
+        let mut frame = [Vec3::ZERO; JOINT_COUNT];
+        for pose in poses {
+            self.world_positions(pose, &mut frame);
+            out.extend_from_slice(&frame);
+        }
+        out
+    }
+
     /// World positions and rotations of every joint in one pass.
     pub fn forward_kinematics(
         &self,
