@@ -296,6 +296,63 @@ pub struct BuiltDance {
     pub start_s: Option<f64>,
     /// Rig fit error, cm.
     pub fit_error_cm: f64,
+    /// Rest height of the fitted rig's hips, metres (the dancer's size).
+    pub hip_height_m: f32,
+}
+
+impl BuiltDance {
+    /// The motion as poses on [`Skeleton::default_adult`](model::rig::Skeleton::default_adult),
+    /// root from the origin, floor at y = 0: the root path is scaled by the ratio of hip heights
+    /// and shifted so the floor found under the toes is at 0, so clips of different dances
+    /// neither float, sink nor jump when played in turn.
+    pub fn poses_on_default_rig(&self) -> Vec<model::rig::Pose> {
+        use model::rig::{Joint, Skeleton};
+        let mut poses = Vec::new();
+        model::motion::decode(&self.motion, model::motion::RootState::ORIGIN, &mut poses);
+        let skeleton = Skeleton::default_adult();
+        let scale = if self.hip_height_m.is_finite() && self.hip_height_m > 0.1 {
+            skeleton.hip_height() / self.hip_height_m
+        } else {
+            1.0
+        };
+        for p in &mut poses {
+            p.root_position *= scale;
+        }
+        // The floor under each frame: the lower toe's height, its minimum over ±0.5 s, then
+        // averaged over ±0.5 s. The captures' vertical drifts slowly (tens of cm over a dance),
+        // which a single floor per dance leaves in; the window keeps a dancer's bounce and dips.
+        let positions = skeleton.trajectory(&poses);
+        let lower: Vec<f32> = positions
+            .chunks_exact(JOINT_COUNT)
+            .map(|f| {
+                f[Joint::LeftToes.index()]
+                    .y
+                    .min(f[Joint::RightToes.index()].y)
+            })
+            .collect();
+        let half = (0.5 * TANG_FPS) as usize;
+        let window = |i: usize| i.saturating_sub(half)..(i + half + 1).min(lower.len());
+        let minimum: Vec<f32> = (0..lower.len())
+            .map(|i| {
+                lower[window(i)]
+                    .iter()
+                    .copied()
+                    .fold(f32::INFINITY, f32::min)
+            })
+            .collect();
+        let floor: Vec<f32> = (0..lower.len())
+            .map(|i| {
+                let w = &minimum[window(i)];
+                w.iter().sum::<f32>() / w.len() as f32
+            })
+            .collect();
+        for (p, f) in poses.iter_mut().zip(&floor) {
+            if f.is_finite() {
+                p.root_position.y -= f;
+            }
+        }
+        poses
+    }
 }
 
 /// Deterministic split by dance, stratified by style: within each style, dances sorted by name,
@@ -329,6 +386,7 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
         music: Vec::new(),
         start_s: None,
         fit_error_cm: fit.mean_error_cm,
+        hip_height_m: fit.skeleton.hip_height(),
     };
     let Some(audio) = &dance.audio else {
         return Ok(built);

@@ -3,9 +3,11 @@
 //! This crate wires the `dsp` analysis to files, commands and (later) the live pipeline.
 
 pub mod bench;
+pub mod dancer;
 pub mod dataset;
 pub mod decode;
 pub mod demo_track;
+pub mod eval;
 pub mod offline;
 pub mod output;
 pub mod plot;

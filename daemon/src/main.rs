@@ -31,29 +31,7 @@ enum Command {
         what: BenchCommand,
     },
     /// Dance to a song offline through the streaming analysis and write the motion as BVH.
-    Generate {
-        /// The song.
-        #[arg(long)]
-        audio: PathBuf,
-        /// Output BVH file.
-        #[arg(long)]
-        out: PathBuf,
-        /// Motion source (only the retrieval dancer exists so far).
-        #[arg(long, default_value = "retrieval")]
-        source: String,
-        /// Stop after this many seconds of audio.
-        #[arg(long)]
-        seconds: Option<f64>,
-        /// Sampling temperature (0: always the best-matching clip).
-        #[arg(long, default_value_t = 0.5)]
-        temperature: f32,
-        /// Random seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// The shared data folder the clip library is cut from (training split of tang2018).
-        #[arg(long, default_value = "../shared/data")]
-        data: PathBuf,
-    },
+    Generate(GenerateArgs),
     /// Export a tang2018 dance, fitted to the rig, as BVH.
     Bvh {
         /// Dance folder name, e.g. DANCE_W_1.
@@ -83,6 +61,78 @@ enum Command {
         #[command(subcommand)]
         what: DatasetCommand,
     },
+    /// Score the motion sources on the validation dances' music: BeatAlign, beat offset, FPD,
+    /// FMD, FID_k, Dist_k, freezes, foot skating, next to the ground truth.
+    Eval {
+        /// The shared data folder (holds tang2018/ and tang2018-beats/).
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Clip library of the retrieval rows (default: the built-in one).
+        #[arg(long)]
+        library: Option<PathBuf>,
+        /// Also score the retrieval dancer on the full library cut from the training split.
+        #[arg(long)]
+        full_library: bool,
+        /// Random seed of the generated rows.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Worker threads for loading.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+    },
+    /// The retrieval dancer's clip library.
+    Library {
+        #[command(subcommand)]
+        what: LibraryCommand,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum LibraryCommand {
+    /// Cut the clip library from the tang2018 training split and write it (the shipped one is
+    /// configs/clips/tang2018-train.danclips).
+    Build {
+        /// The shared data folder (holds tang2018/ and tang2018-beats/).
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Output file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Keep at most this many poses, in runs of clips spread over the library.
+        #[arg(long, default_value_t = daemon::dancer::DEFAULT_MAX_POSES)]
+        max_poses: usize,
+        /// Worker threads.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+    },
+}
+
+#[derive(clap::Args, Debug)]
+struct GenerateArgs {
+    /// The song.
+    #[arg(long)]
+    audio: PathBuf,
+    /// Output BVH file.
+    #[arg(long)]
+    out: PathBuf,
+    /// Motion source (only the retrieval dancer exists so far).
+    #[arg(long, default_value = "retrieval")]
+    source: String,
+    /// Stop after this many seconds of audio.
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// Sampling temperature (0: always the best-matching clip).
+    #[arg(long, default_value_t = 0.5)]
+    temperature: f32,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Clip library file (default: the one built into danced).
+    #[arg(long, conflicts_with = "data")]
+    library: Option<PathBuf>,
+    /// Cut the full clip library from this data folder's tang2018 training split instead.
+    #[arg(long)]
+    data: Option<PathBuf>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -202,16 +252,24 @@ fn main() -> Result<()> {
             what: DatasetCommand::Build { data, out, jobs },
         } => dataset_build(&data, &out, jobs),
         Command::Bvh { dance, out, data } => export_dance(&data, &dance, &out),
-        Command::Generate {
-            audio,
-            out,
-            source,
-            seconds,
-            temperature,
-            seed,
-            data,
-        } => generate(&audio, &out, &source, seconds, temperature, seed, &data),
+        Command::Generate(args) => generate(&args),
         Command::Metrics { bvh, audio, offset } => motion_metrics(&bvh, &audio, offset),
+        Command::Eval {
+            data,
+            library,
+            full_library,
+            seed,
+            jobs,
+        } => eval(&data, library.as_deref(), full_library, seed, jobs),
+        Command::Library {
+            what:
+                LibraryCommand::Build {
+                    data,
+                    out,
+                    max_poses,
+                    jobs,
+                },
+        } => library_build(&data, &out, max_poses, jobs),
     }
 }
 
@@ -636,44 +694,93 @@ fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> 
     Ok(())
 }
 
-fn generate(
-    audio: &std::path::Path,
-    out: &std::path::Path,
-    source: &str,
-    seconds: Option<f64>,
-    temperature: f32,
-    seed: u64,
+fn eval(
     data: &std::path::Path,
+    library: Option<&std::path::Path>,
+    full_library: bool,
+    seed: u64,
+    jobs: usize,
 ) -> Result<()> {
+    let started = Instant::now();
+    let set = daemon::eval::EvalSet::load(data, jobs)?;
+    eprintln!(
+        "validation dances: {} (loaded in {:.1} s)",
+        set.validation_names().join(" "),
+        started.elapsed().as_secs_f64()
+    );
+    let gt = set.ground_truth();
+    let mut rows = vec![set.score("ground truth", &gt)?];
+    let mut libraries = vec![("retrieval", daemon::dancer::load_library(library)?.0)];
+    if full_library {
+        libraries.push((
+            "retrieval, full library",
+            daemon::dancer::training_library(data, jobs)?.0,
+        ));
+    }
+    for (name, lib) in libraries {
+        let mut dancer = daemon::eval::retrieval(lib)?;
+        for t in [0.0f32, 0.5, 1.0] {
+            let (motions, us) = set.generate(&mut dancer, t, seed);
+            let label = format!("{name} T={t}");
+            eprintln!("{label}: {us:.1} µs per frame");
+            rows.push(set.score(&label, &motions)?);
+        }
+    }
+    print!("{}", daemon::eval::table(&rows));
+    eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+fn library_build(
+    data: &std::path::Path,
+    out: &std::path::Path,
+    max_poses: usize,
+    jobs: usize,
+) -> Result<()> {
+    let started = Instant::now();
+    let (full, names) = daemon::dancer::training_library(data, jobs)?;
+    let library = full.subset(max_poses);
+    let meta = daemon::dancer::library_metadata(&library, &names, full.poses.len());
+    let bytes = library.to_bytes(&meta);
+    write_atomic(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "{}: {} clips, {} poses ({:.2} MB) from {} training dances (full library {} clips, {} poses) in {:.1} s",
+        out.display(),
+        library.clips.len(),
+        library.poses.len(),
+        bytes.len() as f64 / 1e6,
+        names.len(),
+        full.clips.len(),
+        full.poses.len(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn generate(args: &GenerateArgs) -> Result<()> {
     use model::source::{Controls, MotionSource};
+    let GenerateArgs {
+        audio,
+        out,
+        source,
+        seconds,
+        temperature,
+        seed,
+        library,
+        data,
+    } = args;
+    let (seconds, temperature, seed) = (*seconds, *temperature, *seed);
     if source != "retrieval" {
         bail!("unknown motion source {source:?} (available: retrieval)");
     }
     let started = Instant::now();
-    // The clip library is cut from the training split at start-up; a compact shipped library
-    // replaces this step later.
-    let dances = daemon::dataset::dances_with_split(data).with_context(|| {
-        format!(
-            "reading {} (the clip library's source)",
-            data.join("tang2018").display()
-        )
-    })?;
-    let train: Vec<_> = dances
-        .into_iter()
-        .filter(|(_, _, validation)| !validation)
-        .map(|(dir, _, _)| dir)
-        .collect();
-    let built = daemon::pool::parallel_map(&train, 2, |dir| {
-        let dance = model::tang2018::load_dance(dir).ok()?;
-        dance.audio.as_ref()?;
-        let b = daemon::dataset::build_dance(&dance, data, false).ok()?;
-        let mut poses = Vec::new();
-        model::motion::decode(&b.motion, model::motion::RootState::ORIGIN, &mut poses);
-        Some((poses, b.music))
-    });
-    let dances: Vec<_> = built.into_iter().flatten().collect();
-    let mut dancer = model::retrieval::RetrievalDancer::from_dances(&dances, seed)
-        .context("building the clip library")?;
+    let library = match data {
+        // The full library, cut from the training split now (slow, needs ../shared).
+        Some(data) => daemon::dancer::training_library(data, 2)?.0,
+        None => daemon::dancer::load_library(library.as_deref())?.0,
+    };
+    let mut dancer = model::retrieval::RetrievalDancer::new(library, seed)
+        .context("starting the retrieval dancer")?;
     let library_s = started.elapsed().as_secs_f64();
     let opts = AnalyzeOptions::native(Some(dancer.frame_rate()));
     let a = analyze_file(audio, opts, &mut |_, _| {})
@@ -696,13 +803,12 @@ fn generate(
         .write(out)
         .with_context(|| format!("writing {}", out.display()))?;
     println!(
-        "{}: {} frames ({:.1} s) at {} fps from {} clips of {} dances → {} (library {:.1} s, {:.1} µs per frame)",
+        "{}: {} frames ({:.1} s) at {} fps from {} clips → {} (library {:.1} s, {:.1} µs per frame)",
         audio.display(),
         poses.len(),
         poses.len() as f64 / dancer.frame_rate(),
         dancer.frame_rate(),
         dancer.library().clips.len(),
-        dances.len(),
         out.display(),
         library_s,
         1e6 * step_s / poses.len().max(1) as f64

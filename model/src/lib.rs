@@ -5,6 +5,7 @@
 
 pub mod alignment;
 pub mod bvh;
+pub mod clip_file;
 pub mod metrics;
 pub mod motion;
 pub mod retrieval;

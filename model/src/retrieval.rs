@@ -36,6 +36,11 @@ const W_ENERGY: f32 = 1.0;
 const W_BAR: f32 = 0.5;
 /// Cost weight of a clip moving less than the library's typical clip (0 to 1 of it).
 const W_STILL: f32 = 4.0;
+/// Weight of root-velocity mismatch, per m/s of horizontal speed difference (in the heading frame).
+///
+/// Without it, continuity of rotations alone happily chains a travelling step into a standing
+/// one: the dancer stops crossing the floor and the clip switches show up as root jerks.
+const W_VELOCITY: f32 = 2.0;
 /// Weight of the distance from a candidate's last pose to the key pose, per unit of Σ(1 − |dot|).
 const W_KEY: f32 = 20.0;
 /// Duration of the offset decay at a clip switch, seconds.
@@ -417,7 +422,14 @@ impl RetrievalDancer {
     }
 
     /// The cost of playing `clip` next, given the last output's rotations (hips de-headed).
-    fn cost(&self, clip: &Clip, hips: Quat, key: Option<&KeyPoseTarget>, key_hips: Quat) -> f32 {
+    fn cost(
+        &self,
+        clip: &Clip,
+        hips: Quat,
+        velocity: Vec3,
+        key: Option<&KeyPoseTarget>,
+        key_hips: Quat,
+    ) -> f32 {
         let lib = &self.library;
         let mut c = W_POSE
             * pose_distance(
@@ -437,6 +449,16 @@ impl RetrievalDancer {
         if lib.typical_motion > 0.0 {
             c += W_STILL * (1.0 - clip.motion / lib.typical_motion).max(0.0);
         }
+        if self.tempo > 0.0 {
+            // The clip's first-frame root velocity as it will play, warped onto the live beat.
+            let p = &lib.poses[clip.start..clip.start + 2];
+            let frames_per_beat = 60.0 * RETRIEVAL_FPS as f32 / self.tempo;
+            let played = (p[1].root_position - p[0].root_position) * clip.len as f32
+                / frames_per_beat
+                * RETRIEVAL_FPS as f32;
+            let d = Vec3::new(played.x - velocity.x, 0.0, played.z - velocity.z);
+            c += W_VELOCITY * d.length();
+        }
         if let Some(k) = key {
             c +=
                 W_KEY * pose_distance(&k.rotations, key_hips, &lib.last_pose(clip).local_rotations);
@@ -447,12 +469,16 @@ impl RetrievalDancer {
     /// Chooses the next clip: the cheapest at temperature 0, else softmax sampling among the `TOP_K` cheapest.
     fn choose(&mut self, controls: &Controls) -> usize {
         let hips = deheaded(self.last_out.local_rotations[0]);
+        // Live root velocity in m/s, in the frame of the dancer's heading (as clips store it).
+        let velocity = yaw(-heading(self.last_out.local_rotations[0]))
+            * (self.last_out.root_position - self.prev_out.root_position)
+            * RETRIEVAL_FPS as f32;
         let key = controls.key_pose.as_ref();
         let key_hips = key.map_or(Quat::IDENTITY, |k| deheaded(k.rotations[0]));
         self.best_cost = [f32::INFINITY; TOP_K];
         self.best_idx = [0; TOP_K];
         for i in 0..self.library.clips.len() {
-            let c = self.cost(&self.library.clips[i], hips, key, key_hips);
+            let c = self.cost(&self.library.clips[i], hips, velocity, key, key_hips);
             let c = if c.is_finite() { c } else { f32::MAX };
             if c >= self.best_cost[TOP_K - 1] {
                 continue;
@@ -569,6 +595,9 @@ impl MotionSource for RetrievalDancer {
             self.anchor = Vec3::ZERO;
             self.anchor_heading = 0.0;
             self.sample_world();
+            // Start from rest in the clip's first pose: nothing to extrapolate from yet.
+            self.last_out = self.scratch;
+            self.prev_out = self.scratch;
         } else if wrapped {
             let next = self.choose(controls);
             self.switch_to(next);

@@ -1,0 +1,273 @@
+//! `danced eval`: every motion source on the validation dances' music, scored with the motion
+//! metrics next to the ground truth and the ground truth against other songs' beats.
+//!
+//! Protocol (fixed so numbers stay comparable between sessions):
+//! - Validation dances with music (the dataset split), music features from the streaming
+//!   analysis at 25 fps, aligned as `danced dataset build` aligns them.
+//! - Music beats: the pseudo-reference beats in `tang2018-beats/`, shifted to motion time.
+//! - Every motion is posed on `Skeleton::default_adult` (ground truth included), so rig
+//!   proportions do not count.
+//! - BeatAlign and beat offset per dance, averaged over dances. "vs other songs" scores the same
+//!   motion against the beats of the next three validation songs (each from its own dance
+//!   start): the chance level that proves the music, not luck, placed the kinematic beats.
+//! - FPD, FMD, FID_k and Dist_k against the *training* dances' ground truth, so the ground
+//!   truth row measures the gap between unseen real dances and the training set. Kinetic
+//!   features are computed on 5 s windows (hop 5 s) to give the covariances enough samples.
+//! - Freezes: the default freeze detector, summed over dances. Foot skating: mean toe speed in
+//!   contact, the floor of each dance at the 5th percentile of its toes' heights.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use model::metrics::{
+    ContactParams, FreezeParams, JointTrack, beat_align, beat_offset, detect_freezes, dist_k,
+    fid_k, fmd, foot_skating, fpd, kinetic_features,
+};
+use model::retrieval::{ClipLibrary, RetrievalDancer};
+use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
+use model::source::{Controls, MotionSource};
+use model::tang2018::TANG_FPS;
+
+use crate::output::read_times;
+
+/// Length of the windows kinetic features are computed on, frames (5 s at 25 fps).
+const KINETIC_WINDOW_FRAMES: usize = 125;
+
+/// One validation dance with what every row needs.
+struct EvalDance {
+    name: String,
+    /// Ground-truth poses (root from the origin).
+    poses: Vec<Pose>,
+    /// Music features, one per motion frame.
+    music: Vec<[f32; dsp::feature::FEATURE_DIM]>,
+    /// Reference beats in motion time, seconds.
+    beats: Vec<f64>,
+}
+
+/// What a row reports (means over dances unless said otherwise).
+#[derive(Clone, Debug, Default)]
+pub struct EvalRow {
+    /// What produced the motion.
+    pub system: String,
+    /// BeatAlign against the song's reference beats.
+    pub beat_align: f64,
+    /// BeatAlign of the same motion against other songs' beats.
+    pub beat_align_other: f64,
+    /// Transflower beat offset, mean over dances of the per-dance mean, seconds.
+    pub beat_offset_s: f64,
+    /// Fréchet pose distance to the training dances.
+    pub fpd: f64,
+    /// Fréchet movement distance to the training dances.
+    pub fmd: f64,
+    /// FID_k against the training dances (5 s windows).
+    pub fid_k: f64,
+    /// Dist_k (diversity of 5 s windows, standardised by the training dances).
+    pub dist_k: f64,
+    /// Freezes, summed over dances.
+    pub freezes: usize,
+    /// Foot skating, m/s while in contact.
+    pub foot_skate_mps: f64,
+    /// Seconds of motion scored.
+    pub seconds: f64,
+}
+
+/// The data the evaluation runs on: validation dances and the training reference.
+pub struct EvalSet {
+    validation: Vec<EvalDance>,
+    /// Training ground-truth world positions, one Vec per dance.
+    train_positions: Vec<Vec<glam::Vec3>>,
+    /// Training kinetic features (5 s windows).
+    train_kinetic: Vec<Vec<f64>>,
+}
+
+/// Kinetic features of every whole 5 s window of a track's positions.
+fn window_kinetics(positions: &[glam::Vec3]) -> Vec<Vec<f64>> {
+    positions
+        .chunks_exact(KINETIC_WINDOW_FRAMES * JOINT_COUNT)
+        .filter_map(|w| {
+            let t = JointTrack::new(w, JOINT_COUNT, TANG_FPS).ok()?;
+            kinetic_features(&t).ok()
+        })
+        .collect()
+}
+
+impl EvalSet {
+    /// Builds every dance under `data` (as `dataset build` does) with `jobs` threads.
+    pub fn load(data: &Path, jobs: usize) -> Result<EvalSet> {
+        let dances = crate::dataset::dances_with_split(data)
+            .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
+        let built = crate::pool::parallel_map(&dances, jobs, |(dir, _, validation)| {
+            let dance = model::tang2018::load_dance(dir).ok()?;
+            dance.audio.as_ref()?;
+            crate::dataset::build_dance(&dance, data, *validation).ok()
+        });
+        let skeleton = Skeleton::default_adult();
+        let mut set = EvalSet {
+            validation: Vec::new(),
+            train_positions: Vec::new(),
+            train_kinetic: Vec::new(),
+        };
+        for b in built.into_iter().flatten() {
+            let poses = b.poses_on_default_rig();
+            if !b.validation {
+                let p = skeleton.trajectory(&poses);
+                set.train_kinetic.extend(window_kinetics(&p));
+                set.train_positions.push(p);
+                continue;
+            }
+            let Some(start) = b.start_s else { continue };
+            let path = data
+                .join("tang2018-beats")
+                .join(format!("{}.beats", b.name));
+            let beats = read_times(&path).with_context(|| format!("reading {}", path.display()))?;
+            set.validation.push(EvalDance {
+                name: b.name.clone(),
+                poses,
+                music: b.music,
+                beats: beats
+                    .iter()
+                    .map(|t| t - start)
+                    .filter(|t| *t >= 0.0)
+                    .collect(),
+            });
+        }
+        anyhow::ensure!(
+            !set.validation.is_empty() && set.train_positions.len() >= 2,
+            "the evaluation needs validation and training dances with music under {}",
+            data.display()
+        );
+        Ok(set)
+    }
+
+    /// Names of the validation dances scored.
+    pub fn validation_names(&self) -> Vec<String> {
+        self.validation.iter().map(|d| d.name.clone()).collect()
+    }
+
+    /// Scores one motion per validation dance (same order as [`EvalSet::validation_names`]).
+    pub fn score(&self, system: &str, motions: &[Vec<Pose>]) -> Result<EvalRow> {
+        let skeleton = Skeleton::default_adult();
+        let positions: Vec<Vec<glam::Vec3>> =
+            motions.iter().map(|m| skeleton.trajectory(m)).collect();
+        let tracks: Vec<JointTrack<'_>> = positions
+            .iter()
+            .map(|p| JointTrack::new(p, JOINT_COUNT, TANG_FPS))
+            .collect::<Result<_, _>>()?;
+        let train: Vec<JointTrack<'_>> = self
+            .train_positions
+            .iter()
+            .map(|p| JointTrack::new(p, JOINT_COUNT, TANG_FPS))
+            .collect::<Result<_, _>>()?;
+        let n = self.validation.len();
+        let mut row = EvalRow {
+            system: system.to_string(),
+            ..Default::default()
+        };
+        let toes = [Joint::LeftToes.index(), Joint::RightToes.index()];
+        for (i, (track, dance)) in tracks.iter().zip(&self.validation).enumerate() {
+            row.seconds += track.duration_s();
+            row.beat_align += beat_align(track, &dance.beats) / n as f64;
+            let others: Vec<f64> = (1..=3.min(n - 1))
+                .map(|k| beat_align(track, &self.validation[(i + k) % n].beats))
+                .collect();
+            row.beat_align_other +=
+                others.iter().sum::<f64>() / others.len().max(1) as f64 / n as f64;
+            if let Ok(o) = beat_offset(track, Joint::Hips.index(), &dance.beats) {
+                row.beat_offset_s += o.mean_s / n as f64;
+            }
+            row.freezes += detect_freezes(track, FreezeParams::default())?.freezes;
+            let mut heights: Vec<f64> = track
+                .positions()
+                .chunks_exact(JOINT_COUNT)
+                .flat_map(|f| toes.map(|t| f[t].y as f64))
+                .collect();
+            heights.sort_by(f64::total_cmp);
+            let ground_y_m = heights.get(heights.len() / 20).copied().unwrap_or(0.0);
+            let s = foot_skating(
+                track,
+                &toes,
+                ContactParams {
+                    ground_y_m,
+                    ..ContactParams::default()
+                },
+            )?;
+            row.foot_skate_mps += s.mean_speed_mps / n as f64;
+        }
+        let root = Joint::Hips.index();
+        row.fpd = fpd(&train, &tracks, root)?;
+        row.fmd = fmd(&train, &tracks, root)?;
+        let kinetic: Vec<Vec<f64>> = positions.iter().flat_map(|p| window_kinetics(p)).collect();
+        row.fid_k = fid_k(&self.train_kinetic, &kinetic)?;
+        row.dist_k = dist_k(&self.train_kinetic, &kinetic)?;
+        Ok(row)
+    }
+
+    /// The ground truth's own motion for every validation dance.
+    pub fn ground_truth(&self) -> Vec<Vec<Pose>> {
+        self.validation.iter().map(|d| d.poses.clone()).collect()
+    }
+
+    /// Runs `source` over every validation dance's music (reset with `seed` before each), at
+    /// temperature `t`; returns the motions and the mean step time in µs.
+    pub fn generate(
+        &self,
+        source: &mut dyn MotionSource,
+        temperature: f32,
+        seed: u64,
+    ) -> (Vec<Vec<Pose>>, f64) {
+        let controls = Controls {
+            temperature,
+            key_pose: None,
+        };
+        let look = source.lookahead_frames();
+        let mut steps = 0usize;
+        let started = std::time::Instant::now();
+        let motions = self
+            .validation
+            .iter()
+            .map(|d| {
+                source.reset(seed);
+                let mut pose = Pose::rest();
+                let mut out = Vec::with_capacity(d.music.len());
+                for i in 0..d.music.len().saturating_sub(look) {
+                    source.step(&d.music[i..=i + look], &controls, &mut pose);
+                    out.push(pose);
+                    steps += 1;
+                }
+                out
+            })
+            .collect();
+        (
+            motions,
+            started.elapsed().as_secs_f64() * 1e6 / steps.max(1) as f64,
+        )
+    }
+}
+
+/// The retrieval dancer on `library`, for rows.
+pub fn retrieval(library: ClipLibrary) -> Result<RetrievalDancer> {
+    RetrievalDancer::new(library, 1).context("starting the retrieval dancer")
+}
+
+/// The table `danced eval` prints.
+pub fn table(rows: &[EvalRow]) -> String {
+    let mut s = String::from(
+        "| system | BeatAlign ↑ | vs other songs | beat offset s ↓ | FPD ↓ | FMD ↓ | FID_k ↓ | Dist_k | freezes | foot skate m/s ↓ |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for r in rows {
+        s += &format!(
+            "| {} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.1} | {:.2} | {} | {:.3} |\n",
+            r.system,
+            r.beat_align,
+            r.beat_align_other,
+            r.beat_offset_s,
+            r.fpd,
+            r.fmd,
+            r.fid_k,
+            r.dist_k,
+            r.freezes,
+            r.foot_skate_mps
+        );
+    }
+    s
+}
