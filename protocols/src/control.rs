@@ -626,6 +626,42 @@ mod tests {
         }
 
         #[test]
+        fn any_arguments_at_our_addresses_are_counted_once_and_never_nan(
+            suffix in prop::sample::select(vec![
+                "/temperature", "/keypose", "/keypose/clear", "/transition", "/seed", "/pause",
+                "/resume", "/tempo", "/nope",
+            ]),
+            args in prop::collection::vec(prop_oneof![
+                any::<i32>().prop_map(OscType::Int),
+                any::<f32>().prop_map(OscType::Float),
+                any::<f64>().prop_map(OscType::Double),
+                any::<i64>().prop_map(OscType::Long),
+                "[a-z:0-9 ]{0,10}".prop_map(OscType::String),
+                any::<bool>().prop_map(OscType::Bool),
+            ], 0..4),
+        ) {
+            let mut p = ControlParser::default();
+            let mut out = Vec::new();
+            p.parse(&msg(&format!("/danced/control{suffix}"), args), &mut out);
+            prop_assert_eq!(p.accepted() + p.unknown_address() + p.bad_arguments(), 1);
+            prop_assert!(out.len() <= 1);
+            for e in out {
+                match e {
+                    ControlEvent::Temperature(x) => prop_assert!((0.0..=2.0).contains(&x)),
+                    ControlEvent::TransitionBeats(x) => prop_assert!(x.is_finite() && x > 0.0),
+                    ControlEvent::TempoHint(x) => prop_assert!((30.0..=300.0).contains(&x)),
+                    ControlEvent::KeyPose { name, quantize } => {
+                        prop_assert!(!name.trim().is_empty());
+                        if let Quantize::InBeats(n) = quantize {
+                            prop_assert!((1..=MAX_QUANTIZE_BEATS).contains(&n));
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+
+        #[test]
         fn temperature_of_any_float_is_finite_and_in_range(x in any::<f32>()) {
             let mut p = ControlParser::default();
             let mut out = Vec::new();

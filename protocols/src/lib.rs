@@ -8,6 +8,8 @@
 //! Bad input (packets, MIDI bytes, TOML) gives a clear error or a counted ignore, never a panic,
 //! and no encoder ever puts a NaN on the wire.
 
+#![warn(missing_docs)]
+
 pub mod address;
 pub mod control;
 pub mod control_receiver;
