@@ -2,8 +2,9 @@
 
 use crate::control::{ControlEvent, Quantize, TEMPERATURE_RANGE, TEMPO_HINT_RANGE};
 use crate::error::ProtocolError;
-use crate::midi::MidiMessage;
+use crate::midi::{MidiMessage, MidiParser};
 use crate::midi_clock::{MidiClockTempo, TICKS_PER_BEAT};
+use crate::midi_input::MidiPacket;
 use serde::Deserialize;
 use std::path::Path;
 use std::time::Instant;
@@ -201,6 +202,22 @@ impl MidiMap {
                 }
             }
             _ => {}
+        }
+    }
+
+    /// Maps a packet from [`crate::MidiInputs::connect`] through `parser` (which keeps running
+    /// status between packets), appending its events; allocates nothing beyond `out`.
+    pub fn map_packet(
+        &mut self,
+        parser: &mut MidiParser,
+        packet: &MidiPacket,
+        out: &mut Vec<ControlEvent>,
+    ) {
+        let (timestamp_us, bytes, len) = *packet;
+        for &b in &bytes[..usize::from(len).min(3)] {
+            if let Some(message) = parser.push(b) {
+                self.map_at(timestamp_us, &message, out);
+            }
         }
     }
 
@@ -443,6 +460,25 @@ mod tests {
         out.clear();
         m.map_at(24 * 8 * tick + 1, &MidiMessage::Stop, &mut out);
         assert_eq!(out, vec![ControlEvent::Pause]);
+    }
+
+    #[test]
+    fn packets_from_the_input_go_through_parser_and_map() {
+        let mut m = MidiMap::load(&configs().join("generic.toml")).unwrap();
+        let mut parser = MidiParser::new();
+        let mut out = Vec::new();
+        m.map_packet(&mut parser, &(10, [0x90, 61, 100], 3), &mut out);
+        // Running status carried over from the previous packet.
+        m.map_packet(&mut parser, &(20, [62, 100, 0], 2), &mut out);
+        m.map_packet(&mut parser, &(30, [0xb0, 1, 127], 9), &mut out);
+        assert_eq!(
+            out,
+            vec![
+                key("pose-2", Quantize::NextBeat),
+                key("pose-3", Quantize::NextBeat),
+                ControlEvent::Temperature(1.5)
+            ]
+        );
     }
 
     #[test]
