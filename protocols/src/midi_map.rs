@@ -1,0 +1,526 @@
+//! What MIDI input means to the dancer, loaded from a TOML file (format in the crate README).
+
+use crate::control::{ControlEvent, Quantize, TEMPERATURE_RANGE, TEMPO_HINT_RANGE};
+use crate::error::ProtocolError;
+use crate::midi::{MidiMessage, MidiParser};
+use crate::midi_clock::{MidiClockTempo, TICKS_PER_BEAT};
+use crate::midi_input::MidiPacket;
+use serde::Deserialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// A tempo hint is re-sent only when the clock's tempo moved at least this much (BPM).
+const TEMPO_HINT_STEP: f32 = 0.1;
+
+/// What a controller (CC) sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CcTarget {
+    /// Dancer temperature.
+    Temperature,
+    /// Transition length in beats.
+    Transition,
+}
+
+/// One note → key pose rule as written in the file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoteRule {
+    /// MIDI note number 0..=127 (60 is middle C).
+    pub note: u8,
+    /// Key pose name in the pose bank.
+    pub pose: String,
+    /// When the pose is reached; the map's `default_quantize` when absent.
+    pub quantize: Option<Quantize>,
+    /// Channel 1..=16 this rule listens to; the map's `channel` when absent.
+    pub channel: Option<u8>,
+}
+
+/// One controller → parameter rule as written in the file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CcRule {
+    /// Controller number 0..=127.
+    pub controller: u8,
+    /// The parameter it sets.
+    pub target: CcTarget,
+    /// Value at controller value 0.
+    pub min: f32,
+    /// Value at controller value 127 (may be below `min` to invert the knob).
+    pub max: f32,
+    /// Channel 1..=16 this rule listens to; the map's `channel` when absent.
+    pub channel: Option<u8>,
+}
+
+/// The file's contents, before validation.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MidiMapConfig {
+    /// Only this channel (1..=16) is listened to, unless a rule names its own; all when absent.
+    pub channel: Option<u8>,
+    /// Quantize of notes that do not name one.
+    #[serde(default = "default_quantize")]
+    pub default_quantize: Quantize,
+    /// Releasing the note that set the current key pose clears it (hold-to-pose pads).
+    #[serde(default)]
+    pub release_clears: bool,
+    /// Program change N sets style seed N.
+    #[serde(default)]
+    pub program_change_seed: bool,
+    /// MIDI clock sets the tempo hint.
+    #[serde(default)]
+    pub clock_tempo: bool,
+    /// Start/Continue resume the dance, Stop pauses it.
+    #[serde(default)]
+    pub transport: bool,
+    /// Note rules.
+    #[serde(default, rename = "note")]
+    pub notes: Vec<NoteRule>,
+    /// Controller rules.
+    #[serde(default, rename = "cc")]
+    pub ccs: Vec<CcRule>,
+}
+
+fn default_quantize() -> Quantize {
+    Quantize::NextBeat
+}
+
+/// Turns MIDI messages into control events according to a loaded map.
+#[derive(Clone, Debug)]
+pub struct MidiMap {
+    config: MidiMapConfig,
+    clock: MidiClockTempo,
+    ticks_since_hint: usize,
+    last_hint: Option<f32>,
+    /// (channel, note) of the note that set the current key pose.
+    held: Option<(u8, u8)>,
+    epoch: Instant,
+}
+
+impl MidiMap {
+    /// A map from TOML text.
+    pub fn from_toml_str(text: &str) -> Result<Self, ProtocolError> {
+        let config: MidiMapConfig = toml::from_str(text)?;
+        Self::from_config(config)
+    }
+
+    /// A map from a TOML file.
+    pub fn load(path: &Path) -> Result<Self, ProtocolError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProtocolError::MapRead {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml_str(&text)
+    }
+
+    /// A map from an already parsed config, validated.
+    pub fn from_config(config: MidiMapConfig) -> Result<Self, ProtocolError> {
+        validate(&config).map_err(ProtocolError::MapInvalid)?;
+        Ok(Self {
+            config,
+            clock: MidiClockTempo::new(),
+            ticks_since_hint: 0,
+            last_hint: None,
+            held: None,
+            epoch: Instant::now(),
+        })
+    }
+
+    /// The validated rules.
+    pub fn config(&self) -> &MidiMapConfig {
+        &self.config
+    }
+
+    /// Maps a message received now; MIDI clock is timed by this process's clock. Prefer
+    /// [`MidiMap::map_at`] with the driver's timestamp, which does not include scheduling delay.
+    pub fn map(&mut self, message: &MidiMessage, out: &mut Vec<ControlEvent>) {
+        let now_us = self.epoch.elapsed().as_micros() as u64;
+        self.map_at(now_us, message, out);
+    }
+
+    /// Maps a message received at `timestamp_us` (any monotonic µs clock), appending its events.
+    pub fn map_at(
+        &mut self,
+        timestamp_us: u64,
+        message: &MidiMessage,
+        out: &mut Vec<ControlEvent>,
+    ) {
+        match *message {
+            MidiMessage::NoteOn {
+                channel,
+                note,
+                velocity: _,
+            } => {
+                if let Some(rule) = self.note_rule(channel, note) {
+                    out.push(ControlEvent::KeyPose {
+                        name: rule.pose.clone(),
+                        quantize: rule.quantize.unwrap_or(self.config.default_quantize),
+                    });
+                    self.held = Some((channel, note));
+                }
+            }
+            MidiMessage::NoteOff { channel, note, .. }
+                if self.config.release_clears && self.held == Some((channel, note)) =>
+            {
+                out.push(ControlEvent::ClearKeyPose);
+                self.held = None;
+            }
+            MidiMessage::ControlChange {
+                channel,
+                controller,
+                value,
+            } => {
+                let rule = self.config.ccs.iter().find(|r| {
+                    r.controller == controller && listens(r.channel, self.config.channel, channel)
+                });
+                if let Some(rule) = rule {
+                    let x = rule.min + (rule.max - rule.min) * f32::from(value.min(127)) / 127.0;
+                    out.push(match rule.target {
+                        CcTarget::Temperature => ControlEvent::Temperature(
+                            x.clamp(TEMPERATURE_RANGE.0, TEMPERATURE_RANGE.1),
+                        ),
+                        CcTarget::Transition => ControlEvent::TransitionBeats(x),
+                    });
+                }
+            }
+            MidiMessage::ProgramChange { channel, program }
+                if self.config.program_change_seed
+                    && listens(None, self.config.channel, channel) =>
+            {
+                out.push(ControlEvent::StyleSeed(u64::from(program)));
+            }
+            MidiMessage::Clock if self.config.clock_tempo => self.clock_tick(timestamp_us, out),
+            MidiMessage::Start | MidiMessage::Continue | MidiMessage::Stop => {
+                self.clock.reset();
+                self.ticks_since_hint = 0;
+                if self.config.transport {
+                    out.push(if *message == MidiMessage::Stop {
+                        ControlEvent::Pause
+                    } else {
+                        ControlEvent::Resume
+                    });
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Maps a packet from [`crate::MidiInputs::connect`] through `parser` (which keeps running
+    /// status between packets), appending its events; allocates nothing beyond `out`.
+    pub fn map_packet(
+        &mut self,
+        parser: &mut MidiParser,
+        packet: &MidiPacket,
+        out: &mut Vec<ControlEvent>,
+    ) {
+        let (timestamp_us, bytes, len) = *packet;
+        for &b in &bytes[..usize::from(len).min(3)] {
+            if let Some(message) = parser.push(b) {
+                self.map_at(timestamp_us, &message, out);
+            }
+        }
+    }
+
+    fn note_rule(&self, channel: u8, note: u8) -> Option<&NoteRule> {
+        self.config
+            .notes
+            .iter()
+            .find(|r| r.note == note && listens(r.channel, self.config.channel, channel))
+    }
+
+    fn clock_tick(&mut self, timestamp_us: u64, out: &mut Vec<ControlEvent>) {
+        let bpm = self.clock.tick(timestamp_us);
+        self.ticks_since_hint += 1;
+        // At most one hint a beat: the clock's 24 ticks a beat would flood the dancer.
+        if self.ticks_since_hint < TICKS_PER_BEAT {
+            return;
+        }
+        let Some(bpm) = bpm else { return };
+        self.ticks_since_hint = 0;
+        let in_range = (TEMPO_HINT_RANGE.0..=TEMPO_HINT_RANGE.1).contains(&bpm);
+        let moved = self
+            .last_hint
+            .is_none_or(|last| (bpm - last).abs() >= TEMPO_HINT_STEP);
+        if in_range && moved {
+            out.push(ControlEvent::TempoHint(bpm));
+            self.last_hint = Some(bpm);
+        }
+    }
+}
+
+/// Whether a rule (own channel, else the map's) listens to wire channel `channel` (0-based).
+fn listens(rule_channel: Option<u8>, map_channel: Option<u8>, channel: u8) -> bool {
+    rule_channel
+        .or(map_channel)
+        .is_none_or(|c| c == channel + 1)
+}
+
+fn validate(c: &MidiMapConfig) -> Result<(), String> {
+    let channel_ok = |ch: Option<u8>, what: &str| match ch {
+        Some(ch) if !(1..=16).contains(&ch) => {
+            Err(format!("{what}: channel {ch} is not in 1..=16"))
+        }
+        _ => Ok(()),
+    };
+    channel_ok(c.channel, "map")?;
+    for (i, r) in c.notes.iter().enumerate() {
+        let what = format!("note rule {} (note {})", i + 1, r.note);
+        if r.note > 127 {
+            return Err(format!("{what}: note is not in 0..=127"));
+        }
+        if r.pose.trim().is_empty() {
+            return Err(format!("{what}: pose name is empty"));
+        }
+        channel_ok(r.channel, &what)?;
+        let ch = r.channel.or(c.channel);
+        if c.notes[..i]
+            .iter()
+            .any(|o| o.note == r.note && o.channel.or(c.channel) == ch)
+        {
+            return Err(format!("{what}: note mapped twice on the same channel"));
+        }
+    }
+    for (i, r) in c.ccs.iter().enumerate() {
+        let what = format!("cc rule {} (controller {})", i + 1, r.controller);
+        if r.controller > 127 {
+            return Err(format!("{what}: controller is not in 0..=127"));
+        }
+        if !r.min.is_finite() || !r.max.is_finite() {
+            return Err(format!("{what}: min and max must be finite numbers"));
+        }
+        channel_ok(r.channel, &what)?;
+        let (lo, hi) = (r.min.min(r.max), r.min.max(r.max));
+        match r.target {
+            CcTarget::Temperature if lo < TEMPERATURE_RANGE.0 || hi > TEMPERATURE_RANGE.1 => {
+                return Err(format!(
+                    "{what}: temperature range {lo}..{hi} is outside {}..{}",
+                    TEMPERATURE_RANGE.0, TEMPERATURE_RANGE.1
+                ));
+            }
+            CcTarget::Transition if lo <= 0.0 => {
+                return Err(format!("{what}: transition beats must be > 0, got {lo}"));
+            }
+            _ => {}
+        }
+        let ch = r.channel.or(c.channel);
+        if c.ccs[..i]
+            .iter()
+            .any(|o| o.controller == r.controller && o.channel.or(c.channel) == ch)
+        {
+            return Err(format!(
+                "{what}: controller mapped twice on the same channel"
+            ));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    fn configs() -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/midi")
+    }
+
+    fn map(m: &mut MidiMap, msg: MidiMessage) -> Vec<ControlEvent> {
+        let mut out = Vec::new();
+        m.map_at(0, &msg, &mut out);
+        out
+    }
+
+    fn key(name: &str, quantize: Quantize) -> ControlEvent {
+        ControlEvent::KeyPose {
+            name: name.into(),
+            quantize,
+        }
+    }
+
+    #[test]
+    fn generic_map_drives_poses_temperature_and_transition() {
+        let mut m = MidiMap::load(&configs().join("generic.toml")).unwrap();
+        let on = |note| MidiMessage::NoteOn {
+            channel: 3,
+            note,
+            velocity: 100,
+        };
+        assert_eq!(map(&mut m, on(60)), vec![key("pose-1", Quantize::NextBeat)]);
+        assert_eq!(
+            map(&mut m, on(75)),
+            vec![key("pose-16", Quantize::NextBeat)]
+        );
+        assert!(map(&mut m, on(59)).is_empty());
+        let cc = |controller, value| MidiMessage::ControlChange {
+            channel: 0,
+            controller,
+            value,
+        };
+        assert_eq!(map(&mut m, cc(1, 0)), vec![ControlEvent::Temperature(0.0)]);
+        assert_eq!(
+            map(&mut m, cc(1, 127)),
+            vec![ControlEvent::Temperature(1.5)]
+        );
+        let ControlEvent::TransitionBeats(b) = map(&mut m, cc(74, 64))[0] else {
+            panic!()
+        };
+        assert!((b - (0.25 + 3.75 * 64.0 / 127.0)).abs() < 1e-6);
+        assert!(map(&mut m, cc(7, 64)).is_empty());
+        assert_eq!(
+            map(
+                &mut m,
+                MidiMessage::ProgramChange {
+                    channel: 0,
+                    program: 9
+                }
+            ),
+            vec![ControlEvent::StyleSeed(9)]
+        );
+    }
+
+    #[test]
+    fn akai_mpd218_map_listens_to_pads_on_channel_10() {
+        let mut m = MidiMap::load(&configs().join("akai-mpd218.toml")).unwrap();
+        let pad = |channel, note| MidiMessage::NoteOn {
+            channel,
+            note,
+            velocity: 127,
+        };
+        assert_eq!(
+            map(&mut m, pad(9, 36)),
+            vec![key("pose-1", Quantize::NextBeat)]
+        );
+        assert_eq!(
+            map(&mut m, pad(9, 51)),
+            vec![key("pose-16", Quantize::NextBeat)]
+        );
+        assert!(
+            map(&mut m, pad(0, 36)).is_empty(),
+            "channel 1 is not the pads"
+        );
+        assert!(map(&mut m, pad(9, 52)).is_empty(), "bank B is unmapped");
+        let knob = |controller, value| MidiMessage::ControlChange {
+            channel: 0,
+            controller,
+            value,
+        };
+        assert_eq!(
+            map(&mut m, knob(3, 127)),
+            vec![ControlEvent::Temperature(1.5)]
+        );
+        assert_eq!(
+            map(&mut m, knob(9, 0)),
+            vec![ControlEvent::TransitionBeats(0.25)]
+        );
+    }
+
+    #[test]
+    fn release_clears_only_for_the_note_holding_the_pose() {
+        let mut m = MidiMap::from_toml_str(
+            "release_clears = true\n[[note]]\nnote = 1\npose = \"a\"\nquantize = \"now\"\n\
+             [[note]]\nnote = 2\npose = \"b\"\n",
+        )
+        .unwrap();
+        let on = |note| MidiMessage::NoteOn {
+            channel: 0,
+            note,
+            velocity: 1,
+        };
+        let off = |note| MidiMessage::NoteOff {
+            channel: 0,
+            note,
+            velocity: 0,
+        };
+        assert_eq!(map(&mut m, on(1)), vec![key("a", Quantize::Now)]);
+        assert_eq!(map(&mut m, on(2)), vec![key("b", Quantize::NextBeat)]);
+        assert!(map(&mut m, off(1)).is_empty(), "a no longer holds the pose");
+        assert_eq!(map(&mut m, off(2)), vec![ControlEvent::ClearKeyPose]);
+    }
+
+    #[test]
+    fn clock_gives_one_tempo_hint_per_beat_when_it_moves() {
+        let mut m = MidiMap::from_toml_str("clock_tempo = true\ntransport = true").unwrap();
+        let mut out = Vec::new();
+        m.map_at(0, &MidiMessage::Start, &mut out);
+        assert_eq!(out, vec![ControlEvent::Resume]);
+        out.clear();
+        let tick = 60_000_000 / 125 / 24; // 125 BPM
+        for i in 1..=24 * 8 {
+            m.map_at(i * tick, &MidiMessage::Clock, &mut out);
+        }
+        assert_eq!(
+            out.len(),
+            1,
+            "steady tempo: one hint, not one per beat: {out:?}"
+        );
+        let ControlEvent::TempoHint(bpm) = out[0] else {
+            panic!()
+        };
+        assert!((bpm - 125.0).abs() < 0.01, "{bpm}");
+        out.clear();
+        m.map_at(24 * 8 * tick + 1, &MidiMessage::Stop, &mut out);
+        assert_eq!(out, vec![ControlEvent::Pause]);
+    }
+
+    #[test]
+    fn packets_from_the_input_go_through_parser_and_map() {
+        let mut m = MidiMap::load(&configs().join("generic.toml")).unwrap();
+        let mut parser = MidiParser::new();
+        let mut out = Vec::new();
+        m.map_packet(&mut parser, &(10, [0x90, 61, 100], 3), &mut out);
+        // Running status carried over from the previous packet.
+        m.map_packet(&mut parser, &(20, [62, 100, 0], 2), &mut out);
+        m.map_packet(&mut parser, &(30, [0xb0, 1, 127], 9), &mut out);
+        assert_eq!(
+            out,
+            vec![
+                key("pose-2", Quantize::NextBeat),
+                key("pose-3", Quantize::NextBeat),
+                ControlEvent::Temperature(1.5)
+            ]
+        );
+    }
+
+    #[test]
+    fn invalid_maps_give_clear_errors() {
+        let cases = [
+            ("channel = 17", "channel 17"),
+            ("[[note]]\nnote = 200\npose = \"a\"", "note"),
+            ("[[note]]\nnote = 1\npose = \"\"", "pose name is empty"),
+            (
+                "[[note]]\nnote = 1\npose = \"a\"\n[[note]]\nnote = 1\npose = \"b\"",
+                "twice",
+            ),
+            (
+                "[[note]]\nnote = 1\npose = \"a\"\nquantize = \"soon\"",
+                "bad quantize",
+            ),
+            (
+                "[[cc]]\ncontroller = 1\ntarget = \"temperature\"\nmin = 0\nmax = 3",
+                "outside",
+            ),
+            (
+                "[[cc]]\ncontroller = 1\ntarget = \"transition\"\nmin = 0\nmax = 3",
+                "> 0",
+            ),
+            (
+                "[[cc]]\ncontroller = 1\ntarget = \"tempo\"\nmin = 0\nmax = 3",
+                "tempo",
+            ),
+            (
+                "[[cc]]\ncontroller = 1\ntarget = \"temperature\"\nmin = nan\nmax = 1",
+                "finite",
+            ),
+            ("colour = \"red\"", "colour"),
+            ("not toml [", "MIDI map"),
+        ];
+        for (text, want) in cases {
+            let e = MidiMap::from_toml_str(text).unwrap_err().to_string();
+            assert!(e.contains(want), "{text:?}: {e}");
+        }
+        let e = MidiMap::load(Path::new("/nonexistent/map.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("/nonexistent/map.toml"), "{e}");
+    }
+}

@@ -1,0 +1,339 @@
+//! Our own OSC layout: one bundle per frame with float and int arguments only, because
+//! TouchDesigner's OSC In CHOP turns only those into channels.
+
+use crate::address::normalise_prefix;
+use crate::error::ProtocolError;
+use crate::finite;
+use crate::frame::{AnalysisEvent, BodyFrame};
+use crate::timetag::osc_time;
+use rosc::{OscBundle, OscMessage, OscPacket, OscType};
+
+/// The address prefix used when none is configured.
+pub const DEFAULT_NATIVE_PREFIX: &str = "/danced";
+
+/// Encodes frames and analysis events in danced's native OSC layout (see the crate README).
+#[derive(Clone, Debug)]
+pub struct NativeEncoder {
+    prefix: String,
+    buf: Vec<u8>,
+    replaced_non_finite: u64,
+}
+
+impl Default for NativeEncoder {
+    fn default() -> Self {
+        Self {
+            prefix: DEFAULT_NATIVE_PREFIX.to_string(),
+            buf: Vec::with_capacity(4096),
+            replaced_non_finite: 0,
+        }
+    }
+}
+
+impl NativeEncoder {
+    /// An encoder whose addresses start with `prefix` (e.g. "/danced"; "/" for none).
+    pub fn with_prefix(prefix: &str) -> Result<Self, ProtocolError> {
+        Ok(Self {
+            prefix: normalise_prefix(prefix)?,
+            ..Self::default()
+        })
+    }
+
+    /// The normalised prefix, without a trailing '/'.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    /// How many poses, times or values had a non-finite number replaced so far.
+    pub fn replaced_non_finite(&self) -> u64 {
+        self.replaced_non_finite
+    }
+
+    /// The frame as one OSC bundle timetagged with `frame.timetag`.
+    pub fn frame_packet(&mut self, frame: &BodyFrame) -> OscPacket {
+        let mut content = Vec::with_capacity(frame.bones.len() + 2);
+        let time = self.checked64(frame.audio_time_s);
+        content.push(self.message(
+            "/frame",
+            vec![
+                // i32 is all the CHOP reads; wrapping at 2^31 frames is years away at 60 fps.
+                OscType::Int((frame.frame_index & 0x7fff_ffff) as i32),
+                OscType::Float(time),
+            ],
+        ));
+        let (p, q) = self.checked_pose(frame.root_position, frame.root_rotation);
+        content.push(self.message("/root", floats(&[p.x, p.y, p.z, q.x, q.y, q.z, q.w])));
+        for bone in &frame.bones {
+            let (p, _) = self.checked_pose(bone.world_position, glam::Quat::IDENTITY);
+            let (_, q) = self.checked_pose(glam::Vec3::ZERO, bone.local_rotation);
+            let addr = format!("{}/joint/{}", self.prefix, bone.bone);
+            content.push(OscPacket::Message(OscMessage {
+                addr,
+                args: floats(&[p.x, p.y, p.z, q.x, q.y, q.z, q.w]),
+            }));
+        }
+        OscPacket::Bundle(OscBundle {
+            timetag: osc_time(frame.timetag),
+            content,
+        })
+    }
+
+    /// The analysis event as one OSC message (no bundle: events are not scheduled).
+    pub fn event_packet(&mut self, event: &AnalysisEvent) -> OscPacket {
+        match *event {
+            AnalysisEvent::Beat {
+                time_s,
+                index_in_bar,
+                beats_per_bar,
+                tempo_bpm,
+            } => {
+                let tempo = self.checked(tempo_bpm);
+                let time = self.checked64(time_s);
+                self.message(
+                    "/beat",
+                    vec![
+                        OscType::Int(clamp_i32(index_in_bar)),
+                        OscType::Int(clamp_i32(beats_per_bar)),
+                        OscType::Float(tempo),
+                        OscType::Float(time),
+                    ],
+                )
+            }
+            AnalysisEvent::Onset { time_s, strength } => {
+                let args = floats(&[self.checked(strength), self.checked64(time_s)]);
+                self.message("/onset", args)
+            }
+            AnalysisEvent::Tempo { bpm, confidence } => {
+                let args = floats(&[self.checked(bpm), self.checked(confidence)]);
+                self.message("/tempo", args)
+            }
+            AnalysisEvent::Chroma { chroma, .. } => {
+                let mut values = [0.0f32; 12];
+                for (v, c) in values.iter_mut().zip(chroma) {
+                    *v = self.checked(c);
+                }
+                self.message("/chroma", floats(&values))
+            }
+            AnalysisEvent::Energy { db, .. } => {
+                let args = floats(&[self.checked(db)]);
+                self.message("/energy", args)
+            }
+        }
+    }
+
+    /// The frame's bundle encoded; the slice borrows a buffer reused by the next call.
+    pub fn encode_frame(&mut self, frame: &BodyFrame) -> &[u8] {
+        let packet = self.frame_packet(frame);
+        self.encode(&packet)
+    }
+
+    /// The event's message encoded; the slice borrows a buffer reused by the next call.
+    pub fn encode_event(&mut self, event: &AnalysisEvent) -> &[u8] {
+        let packet = self.event_packet(event);
+        self.encode(&packet)
+    }
+
+    fn encode(&mut self, packet: &OscPacket) -> &[u8] {
+        self.buf.clear();
+        // Encoding into a Vec<u8> cannot fail (its error type is Infallible).
+        let _ = rosc::encoder::encode_into(packet, &mut self.buf);
+        &self.buf
+    }
+
+    fn message(&self, suffix: &str, args: Vec<OscType>) -> OscPacket {
+        OscPacket::Message(OscMessage {
+            addr: format!("{}{}", self.prefix, suffix),
+            args,
+        })
+    }
+
+    fn checked(&mut self, x: f32) -> f32 {
+        if !x.is_finite() {
+            self.replaced_non_finite += 1;
+        }
+        finite::scalar(x)
+    }
+
+    fn checked64(&mut self, x: f64) -> f32 {
+        let y = finite::scalar64(x);
+        if !(x as f32).is_finite() {
+            self.replaced_non_finite += 1;
+        }
+        y
+    }
+
+    fn checked_pose(&mut self, p: glam::Vec3, q: glam::Quat) -> (glam::Vec3, glam::Quat) {
+        if !finite::is_finite_pose(p, q) {
+            self.replaced_non_finite += 1;
+        }
+        (finite::vec3(p), finite::quat(q))
+    }
+}
+
+/// Float arguments from a slice.
+pub(crate) fn floats(values: &[f32]) -> Vec<OscType> {
+    values.iter().map(|&v| OscType::Float(v)).collect()
+}
+
+fn clamp_i32(x: u32) -> i32 {
+    x.min(i32::MAX as u32) as i32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::BoneSample;
+    use glam::{Quat, Vec3};
+    use rosc::decoder::decode_udp;
+    use std::time::{Duration, UNIX_EPOCH};
+
+    pub(crate) fn frame() -> BodyFrame {
+        let bone = |name, x: f32| BoneSample {
+            bone: name,
+            local_position: Vec3::new(0.0, x, 0.0),
+            local_rotation: Quat::from_rotation_y(0.5),
+            world_position: Vec3::new(x, 1.0, 0.25),
+            world_rotation: Quat::from_rotation_x(0.25),
+        };
+        BodyFrame {
+            frame_index: 42,
+            audio_time_s: 12.5,
+            timetag: UNIX_EPOCH + Duration::from_secs(1_700_000_000),
+            root_position: Vec3::new(0.5, 0.0, -1.0),
+            root_rotation: Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+            bones: vec![bone("Hips", 0.9), bone("LeftUpperArm", 0.3)],
+        }
+    }
+
+    fn messages(packet: OscPacket) -> (rosc::OscTime, Vec<OscMessage>) {
+        match packet {
+            OscPacket::Bundle(b) => (
+                b.timetag,
+                b.content
+                    .into_iter()
+                    .map(|p| match p {
+                        OscPacket::Message(m) => m,
+                        OscPacket::Bundle(_) => panic!("nested bundle"),
+                    })
+                    .collect(),
+            ),
+            OscPacket::Message(_) => panic!("expected a bundle"),
+        }
+    }
+
+    #[test]
+    fn frame_round_trips_through_rosc_decoder() {
+        let mut enc = NativeEncoder::default();
+        let bytes = enc.encode_frame(&frame()).to_vec();
+        let (rest, packet) = decode_udp(&bytes).unwrap();
+        assert!(rest.is_empty());
+        let (tag, msgs) = messages(packet);
+        assert_eq!(tag.seconds, 1_700_000_000 + 2_208_988_800);
+        assert_eq!(msgs.len(), 4);
+        assert_eq!(msgs[0].addr, "/danced/frame");
+        assert_eq!(msgs[0].args, vec![OscType::Int(42), OscType::Float(12.5)]);
+        assert_eq!(msgs[1].addr, "/danced/root");
+        let s = std::f32::consts::FRAC_1_SQRT_2;
+        let want = [0.5, 0.0, -1.0, 0.0, s, 0.0, s];
+        for (arg, w) in msgs[1].args.iter().zip(want) {
+            assert!((arg.clone().float().unwrap() - w).abs() < 1e-6);
+        }
+        assert_eq!(msgs[2].addr, "/danced/joint/Hips");
+        assert_eq!(msgs[3].addr, "/danced/joint/LeftUpperArm");
+        let a: Vec<f32> = msgs[3]
+            .args
+            .iter()
+            .map(|a| a.clone().float().unwrap())
+            .collect();
+        assert_eq!(&a[..3], &[0.3, 1.0, 0.25]);
+        assert!(
+            (a[4] - 0.25f32.sin()).abs() < 1e-6,
+            "local rotation about Y: {a:?}"
+        );
+        assert!((a[6] - 0.25f32.cos()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn non_finite_values_are_replaced_and_counted() {
+        let mut enc = NativeEncoder::with_prefix("/x/").unwrap();
+        let mut f = frame();
+        f.root_position.x = f32::NAN;
+        f.bones[0].local_rotation = Quat::from_xyzw(f32::INFINITY, 0.0, 0.0, 1.0);
+        f.audio_time_s = f64::NAN;
+        let (_, packet) = decode_udp(enc.encode_frame(&f)).unwrap();
+        let (_, msgs) = messages(packet);
+        assert_eq!(msgs[0].addr, "/x/frame");
+        assert_eq!(msgs[0].args[1], OscType::Float(0.0));
+        assert_eq!(msgs[1].args[0], OscType::Float(0.0));
+        assert_eq!(msgs[2].args[6], OscType::Float(1.0), "identity rotation");
+        assert_eq!(enc.replaced_non_finite(), 3);
+    }
+
+    #[test]
+    fn events_encode_with_documented_arguments() {
+        let mut enc = NativeEncoder::default();
+        let cases = [
+            (
+                AnalysisEvent::Beat {
+                    time_s: 3.0,
+                    index_in_bar: 2,
+                    beats_per_bar: 4,
+                    tempo_bpm: 128.0,
+                },
+                "/danced/beat",
+                vec![
+                    OscType::Int(2),
+                    OscType::Int(4),
+                    OscType::Float(128.0),
+                    OscType::Float(3.0),
+                ],
+            ),
+            (
+                AnalysisEvent::Onset {
+                    time_s: 1.5,
+                    strength: 0.75,
+                },
+                "/danced/onset",
+                floats(&[0.75, 1.5]),
+            ),
+            (
+                AnalysisEvent::Tempo {
+                    bpm: 99.5,
+                    confidence: f32::NAN,
+                },
+                "/danced/tempo",
+                floats(&[99.5, 0.0]),
+            ),
+            (
+                AnalysisEvent::Energy {
+                    time_s: 0.0,
+                    db: -12.0,
+                },
+                "/danced/energy",
+                floats(&[-12.0]),
+            ),
+        ];
+        for (event, addr, args) in cases {
+            let (_, packet) = decode_udp(enc.encode_event(&event)).unwrap();
+            assert_eq!(
+                packet,
+                OscPacket::Message(OscMessage {
+                    addr: addr.into(),
+                    args
+                })
+            );
+        }
+        let mut chroma = [0.0; 12];
+        chroma[9] = 1.0;
+        let (_, packet) = decode_udp(enc.encode_event(&AnalysisEvent::Chroma {
+            time_s: 0.0,
+            chroma,
+        }))
+        .unwrap();
+        let OscPacket::Message(m) = packet else {
+            panic!()
+        };
+        assert_eq!(m.addr, "/danced/chroma");
+        assert_eq!(m.args.len(), 12);
+        assert_eq!(m.args[9], OscType::Float(1.0));
+    }
+}
