@@ -12,3 +12,4 @@ pub mod offline;
 pub mod output;
 pub mod plot;
 pub mod pool;
+pub mod pose_bank;

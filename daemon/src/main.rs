@@ -89,6 +89,16 @@ enum Command {
 
 #[derive(Subcommand, Debug)]
 enum LibraryCommand {
+    /// Pick the key-pose bank from the shipped clip library: the poses farthest apart, written
+    /// as a BVH plus a TOML naming its frames (the shipped one is configs/poses/).
+    Poses {
+        /// Output folder (bank.bvh and bank.toml are written there).
+        #[arg(long)]
+        out: PathBuf,
+        /// How many poses.
+        #[arg(long, default_value_t = 16)]
+        count: usize,
+    },
     /// Cut the clip library from the tang2018 training split and write it (the shipped one is
     /// configs/clips/tang2018-train.danclips).
     Build {
@@ -270,6 +280,9 @@ fn main() -> Result<()> {
                     jobs,
                 },
         } => library_build(&data, &out, max_poses, jobs),
+        Command::Library {
+            what: LibraryCommand::Poses { out, count },
+        } => library_poses(&out, count),
     }
 }
 
@@ -728,6 +741,25 @@ fn eval(
     }
     print!("{}", daemon::eval::table(&rows));
     eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+fn library_poses(out: &std::path::Path, count: usize) -> Result<()> {
+    use daemon::pose_bank::{bank_toml, pick_diverse_poses};
+    let (library, _) = daemon::dancer::load_library(None)?;
+    let poses = pick_diverse_poses(&library, count);
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let skeleton = model::rig::Skeleton::default_adult();
+    let bvh = out.join("bank.bvh");
+    model::bvh::export(&skeleton, &poses, 1.0)
+        .write(&bvh)
+        .with_context(|| format!("writing {}", bvh.display()))?;
+    let toml = out.join("bank.toml");
+    write_atomic(&toml, bank_toml(&poses, "bank.bvh").as_bytes())
+        .with_context(|| format!("writing {}", toml.display()))?;
+    for (i, p) in poses.iter().enumerate() {
+        println!("pose-{}: {}", i + 1, daemon::pose_bank::describe(p));
+    }
     Ok(())
 }
 
