@@ -143,6 +143,15 @@ struct GenerateArgs {
     /// Cut the full clip library from this data folder's tang2018 training split instead.
     #[arg(long)]
     data: Option<PathBuf>,
+    /// Reach a key pose of the bank at a time: NAME@SECONDS (repeatable), e.g. pose-3@12.5.
+    #[arg(long = "keypose")]
+    key_poses: Vec<String>,
+    /// Key-pose bank (TOML; default: the built-in configs/poses/bank.toml).
+    #[arg(long)]
+    poses: Option<PathBuf>,
+    /// How long before its moment a key pose is announced to the dancer, seconds.
+    #[arg(long, default_value_t = 2.0)]
+    keypose_lead: f64,
 }
 
 #[derive(Subcommand, Debug)]
@@ -800,8 +809,35 @@ fn generate(args: &GenerateArgs) -> Result<()> {
         seed,
         library,
         data,
+        key_poses,
+        poses: bank_path,
+        keypose_lead,
     } = args;
     let (seconds, temperature, seed) = (*seconds, *temperature, *seed);
+    let fps = model::retrieval::RETRIEVAL_FPS;
+    let mut cues = Vec::new();
+    if !key_poses.is_empty() {
+        let bank = match bank_path {
+            Some(p) => daemon::pose_bank::PoseBank::load(p)?,
+            None => daemon::pose_bank::PoseBank::shipped()?,
+        };
+        for spec in key_poses {
+            let (name, at) = daemon::key_cue::parse_cue_spec(spec)?;
+            let Some(pose) = bank.get(&name) else {
+                let names: Vec<&str> = bank.poses().iter().map(|p| p.name.as_str()).collect();
+                bail!(
+                    "key pose {name:?} is not in the bank (it has {})",
+                    names.join(", ")
+                );
+            };
+            cues.push(daemon::key_cue::KeyCue {
+                name,
+                rotations: pose.rotations,
+                frame: (at * fps).round() as usize,
+            });
+        }
+    }
+    let lead_frames = (keypose_lead.max(0.0) * fps).round() as usize;
     if source != "retrieval" {
         bail!("unknown motion source {source:?} (available: retrieval)");
     }
@@ -817,19 +853,30 @@ fn generate(args: &GenerateArgs) -> Result<()> {
     let opts = AnalyzeOptions::native(Some(dancer.frame_rate()));
     let a = analyze_file(audio, opts, &mut |_, _| {})
         .with_context(|| format!("analysing {}", audio.display()))?;
-    let controls = Controls {
-        temperature,
-        key_pose: None,
-    };
     let limit = seconds.map_or(usize::MAX, |s| (s * dancer.frame_rate()) as usize);
     let mut pose = model::rig::Pose::rest();
     let mut poses = Vec::with_capacity(a.features.len().min(limit));
     let step_start = Instant::now();
-    for f in a.features.iter().take(limit) {
+    for (i, f) in a.features.iter().take(limit).enumerate() {
+        let controls = Controls {
+            temperature,
+            key_pose: daemon::key_cue::target_at(&cues, i, lead_frames),
+        };
         dancer.step(std::slice::from_ref(&f.values), &controls, &mut pose);
         poses.push(pose);
     }
     let step_s = step_start.elapsed().as_secs_f64();
+    for c in &cues {
+        match poses.get(c.frame) {
+            Some(p) => println!(
+                "key pose {} at {:.2} s: mean joint error {:.2} cm",
+                c.name,
+                c.frame as f64 / fps,
+                daemon::key_cue::key_pose_error_cm(p, &c.rotations)
+            ),
+            None => println!("key pose {} lies after the end of the motion", c.name),
+        }
+    }
     let skeleton = model::rig::Skeleton::default_adult();
     model::bvh::export(&skeleton, &poses, dancer.frame_rate())
         .write(out)
