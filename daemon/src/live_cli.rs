@@ -122,12 +122,13 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         _ => None,
     };
     let mut status = StatusPrinter::new();
-    let mut next_rss = Duration::ZERO;
-    ctx.stats.sample_rss(0.0);
+    // Memory is sampled from 1 s on (after start-up) while the input still runs: a finished
+    // replay frees its audio, which would fake a shrinking process.
+    let mut next_rss = Duration::from_secs(1);
     while !ctx.stopped() && !pipeline.failed() {
         std::thread::sleep(status.interval());
         let elapsed = started.elapsed();
-        if elapsed >= next_rss {
+        if elapsed >= next_rss && !ctx.stopped() {
             ctx.stats.sample_rss(elapsed.as_secs_f64());
             next_rss += Duration::from_secs(1);
         }
@@ -138,7 +139,6 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             ctx.stop.store(true, Ordering::Relaxed);
         }
     }
-    ctx.stats.sample_rss(started.elapsed().as_secs_f64());
     status.finish();
     let (report, _sink) = pipeline.stop()?;
     for h in [replay_handle, capture_handle].into_iter().flatten() {

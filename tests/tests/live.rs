@@ -101,6 +101,16 @@ struct Run {
 
 /// Replays `seconds` of clicks at `speed`; `controls` are sent at the given wall offsets.
 fn run(seconds: f64, speed: f64, controls: Vec<(f64, ControlEvent)>) -> Run {
+    run_until(seconds, speed, controls, None)
+}
+
+/// As [`run`], but the audio ends after `seconds` while the run goes on until `wall_stop_s`.
+fn run_until(
+    seconds: f64,
+    speed: f64,
+    controls: Vec<(f64, ControlEvent)>,
+    wall_stop_s: Option<f64>,
+) -> Run {
     let ctx = LiveContext::new();
     let (writer, reader) = ctx.ring();
     let (tx, rx): (_, Receiver<SinkItem>) = unbounded();
@@ -128,11 +138,15 @@ fn run(seconds: f64, speed: f64, controls: Vec<(f64, ControlEvent)>) -> Run {
     )
     .unwrap();
     let replay = replay::spawn(
-        click_track(seconds + 1.0),
+        click_track(if wall_stop_s.is_some() {
+            seconds
+        } else {
+            seconds + 1.0
+        }),
         ReplaySettings {
             speed,
             looped: false,
-            duration_s: Some(seconds),
+            duration_s: wall_stop_s.is_none().then_some(seconds),
         },
         writer,
         &ctx,
@@ -151,6 +165,9 @@ fn run(seconds: f64, speed: f64, controls: Vec<(f64, ControlEvent)>) -> Run {
                 true
             }
         });
+        if wall_stop_s.is_some_and(|w| t >= w) {
+            ctx.stop.store(true, Ordering::Relaxed);
+        }
         assert!(t < 30.0, "the replay never ended");
     }
     let (report, _) = pipeline.stop().unwrap();
@@ -296,4 +313,28 @@ fn bad_config_names_the_key() {
     let e = Config::parse("[audio]\nspeeed = 2.0\n", std::path::Path::new("bad.toml")).unwrap_err();
     let msg = e.to_string();
     assert!(msg.contains("speeed") && msg.contains("bad.toml"), "{msg}");
+}
+
+#[test]
+fn keeps_dancing_when_the_audio_stops() {
+    // 1 s of clicks at 4× (0.25 s of wall time), then nothing for 1.75 s.
+    let r = run_until(1.0, 4.0, Vec::new(), Some(2.0));
+    assert!(r.report.silence_frames > 0);
+    let last = r.frames.last().unwrap().1;
+    let first = r.frames[0].1;
+    // Frames keep flowing at the full rate to the very end.
+    let span = (last - first).as_secs_f64();
+    assert!(span > 1.7, "frames stopped after {span:.2} s");
+    let late_rate = r
+        .frames
+        .iter()
+        .filter(|(_, at)| (*at - first).as_secs_f64() > 1.0)
+        .count() as f64
+        / (span - 1.0);
+    assert!(late_rate > 50.0, "{late_rate} Hz without audio");
+    assert!(
+        r.seen.len() as f64 > 1.5 * FPS,
+        "{} model frames",
+        r.seen.len()
+    );
 }
