@@ -1,7 +1,8 @@
 //! danced: listens to music and makes a character dance to it, live.
 //!
-//! This crate wires the `dsp` analysis to files, commands and (later) the live pipeline.
+//! This crate wires the `dsp` analysis to files, commands and the live pipeline.
 
+pub mod alloc_counter;
 pub mod bench;
 pub mod dancer;
 pub mod dataset;
@@ -9,6 +10,8 @@ pub mod decode;
 pub mod demo_track;
 pub mod eval;
 pub mod key_cue;
+pub mod live;
+pub mod live_cli;
 pub mod offline;
 pub mod output;
 pub mod plot;

@@ -9,9 +9,16 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tracing_subscriber::EnvFilter;
 
 use daemon::bench;
+use daemon::live::config::Config;
+use daemon::live_cli::{AudioSource, RunMode, run_live, summary};
 use daemon::offline::{AnalyzeOptions, analyze_file, analyze_samples};
 use daemon::output::{beats_text, features_npy, features_sidecar, onsets_text, write_atomic};
 use dsp::BeatTrackerKind;
+
+// Counts allocations in the audio callback path (see `daemon::alloc_counter`).
+#[global_allocator]
+static ALLOCATOR: daemon::alloc_counter::CountingAllocator =
+    daemon::alloc_counter::CountingAllocator;
 
 /// Listens to music and makes a 3D character dance to it, live.
 #[derive(Parser, Debug)]
@@ -56,6 +63,22 @@ enum Command {
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         offset: f64,
     },
+    /// Dance live to the sound card (or a replayed file) and send the motion.
+    Run(RunArgs),
+    /// Dance live to the built-in demo song (no sound card, no files needed).
+    Demo {
+        /// Stop after this many seconds (runs until Ctrl-C otherwise).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Frames sent per second.
+        #[arg(long)]
+        rate: Option<f64>,
+        /// Write the run's stats as JSON here.
+        #[arg(long)]
+        stats_json: Option<PathBuf>,
+    },
+    /// List the audio inputs.
+    Devices,
     /// The tang2018 training data: audit it.
     Dataset {
         #[command(subcommand)]
@@ -185,6 +208,64 @@ enum DatasetCommand {
 enum BenchCommand {
     /// Beat tracking accuracy and speed: native and aubio on synth-beats, tang2018, madmom-tests.
     Beats(BenchBeatsArgs),
+    /// The live pipeline at 1× on a replayed file: latency, jitter, CPU, memory, drops.
+    Live {
+        /// Audio file (the built-in demo song, looped, without one).
+        #[arg(long)]
+        input: Option<PathBuf>,
+        /// Seconds to run.
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+        /// Frames sent per second.
+        #[arg(long, default_value_t = 60.0)]
+        rate: f64,
+        /// Write the stats as JSON here.
+        #[arg(long)]
+        stats_json: Option<PathBuf>,
+    },
+}
+
+#[derive(clap::Args, Debug)]
+struct RunArgs {
+    /// Configuration file (see configs/danced.toml); flags override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Replay this audio file instead of capturing.
+    #[arg(long, conflicts_with = "device")]
+    input: Option<PathBuf>,
+    /// Capture from the first input whose name contains this text.
+    #[arg(long)]
+    device: Option<String>,
+    /// Replay speed (audio seconds per wall second).
+    #[arg(long)]
+    speed: Option<f64>,
+    /// Replay in a loop.
+    #[arg(long = "loop")]
+    looped: bool,
+    /// Stop after this many seconds of audio.
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Plain OSC target host:port (repeatable).
+    #[arg(long)]
+    osc: Vec<String>,
+    /// Send VMC to host:port.
+    #[arg(long)]
+    vmc: Option<String>,
+    /// Send VRChat OSC trackers to host:port.
+    #[arg(long)]
+    vrchat: Option<String>,
+    /// MIDI input port (name substring).
+    #[arg(long)]
+    midi: Option<String>,
+    /// UDP port of the OSC control receiver.
+    #[arg(long)]
+    control_port: Option<u16>,
+    /// Write the run's stats as JSON here.
+    #[arg(long)]
+    stats_json: Option<PathBuf>,
+    /// Frames sent per second.
+    #[arg(long)]
+    rate: Option<f64>,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -258,6 +339,7 @@ fn main() -> Result<()> {
         )
         .with_writer(std::io::stderr)
         .init();
+    daemon::alloc_counter::mark_installed();
     let cli = Cli::parse();
     match cli.command {
         Command::Analyze(args) => analyze(args),
@@ -292,7 +374,109 @@ fn main() -> Result<()> {
         Command::Library {
             what: LibraryCommand::Poses { out, count },
         } => library_poses(&out, count),
+        Command::Run(args) => run(args),
+        Command::Demo {
+            duration,
+            rate,
+            stats_json,
+        } => {
+            let mut config = Config::default();
+            config.audio.duration = duration;
+            config.stats_json = stats_json;
+            if let Some(r) = rate {
+                config.output.rate_hz = r;
+            }
+            config.validate("command line")?;
+            let report = run_live(&config, AudioSource::Demo, RunMode::Interactive)?;
+            println!("{}", summary(&report));
+            Ok(())
+        }
+        Command::Devices => {
+            println!("audio inputs:");
+            for line in daemon::live::devices::list_inputs() {
+                println!("  {line}");
+            }
+            println!("MIDI inputs:");
+            for line in daemon::live::devices::list_midi() {
+                println!("  {line}");
+            }
+            Ok(())
+        }
+        Command::Bench {
+            what:
+                BenchCommand::Live {
+                    input,
+                    seconds,
+                    rate,
+                    stats_json,
+                },
+        } => {
+            let mut config = Config::default();
+            config.audio.duration = Some(seconds);
+            config.audio.looped = true;
+            config.output.rate_hz = rate;
+            config.stats_json = stats_json;
+            config.validate("command line")?;
+            let audio = input.map_or(AudioSource::Demo, AudioSource::File);
+            eprintln!("running the live pipeline at 1× for {seconds} s...");
+            let report = run_live(&config, audio, RunMode::Quiet)?;
+            println!("{}", summary(&report));
+            Ok(())
+        }
     }
+}
+
+fn run(args: RunArgs) -> Result<()> {
+    let mut config = match &args.config {
+        Some(p) => Config::load(p)?,
+        None => Config::default(),
+    };
+    if let Some(i) = args.input {
+        config.audio.input = Some(i);
+        config.audio.device = None;
+    }
+    if let Some(d) = args.device {
+        config.audio.device = Some(d);
+        config.audio.input = None;
+    }
+    if let Some(s) = args.speed {
+        config.audio.speed = s;
+    }
+    config.audio.looped |= args.looped;
+    if args.duration.is_some() {
+        config.audio.duration = args.duration;
+    }
+    if !args.osc.is_empty() {
+        config.output.osc = args.osc;
+    }
+    if let Some(v) = args.vmc {
+        config.output.vmc.enabled = true;
+        config.output.vmc.target = v;
+    }
+    if let Some(v) = args.vrchat {
+        config.output.vrchat.enabled = true;
+        config.output.vrchat.target = v;
+    }
+    if args.midi.is_some() {
+        config.control.midi_port = args.midi;
+    }
+    if let Some(p) = args.control_port {
+        config.control.osc_port = p;
+    }
+    if args.stats_json.is_some() {
+        config.stats_json = args.stats_json;
+    }
+    if let Some(r) = args.rate {
+        config.output.rate_hz = r;
+    }
+    config.validate("command line")?;
+    let audio = match (&config.audio.input, &config.audio.device) {
+        (Some(i), _) => AudioSource::File(i.clone()),
+        (None, d) => AudioSource::Capture(d.clone()),
+    };
+    let report = run_live(&config, audio, RunMode::Interactive)?;
+    println!("{}", summary(&report));
+    Ok(())
 }
 
 fn progress_bar(hidden: bool) -> ProgressBar {

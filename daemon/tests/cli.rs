@@ -225,3 +225,72 @@ fn generate_dances_to_a_song_and_writes_bvh() {
     assert!((first[0] - last[0]).length() > 1.0, "hips did not move");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn live_run_on_a_file_writes_stats_and_a_bad_config_names_the_key() {
+    let dir = scratch("live");
+    let wav = dir.join("clicks.wav");
+    let rate = 22_050;
+    let mut samples = vec![0.0f32; rate as usize * 3];
+    for beat in 0..6 {
+        let start = beat * rate as usize / 2;
+        for (i, s) in samples[start..start + 400].iter_mut().enumerate() {
+            *s = 0.8 * (-(i as f32) / 80.0).exp() * if i % 2 == 0 { 1.0 } else { -1.0 };
+        }
+    }
+    write_wav(&wav, &samples, rate, 1);
+    let stats = dir.join("stats.json");
+    let out = danced()
+        .args(["run", "--input"])
+        .arg(&wav)
+        .args(["--speed", "4", "--duration", "2.5", "--stats-json"])
+        .arg(&stats)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json = std::fs::read_to_string(&stats).unwrap();
+    for key in [
+        "latency_ms_p99",
+        "jitter_ms_p99",
+        "cpu_percent",
+        "callback_allocations",
+    ] {
+        assert!(json.contains(key), "{json}");
+    }
+    assert!(json.contains("\"callback_allocations\": 0"), "{json}");
+
+    let config = dir.join("bad.toml");
+    std::fs::write(&config, "[output]\nrate = 30\n").unwrap();
+    let out = danced()
+        .args(["run", "--config"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("bad.toml") && err.contains("rate"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn devices_and_a_missing_input_fail_cleanly() {
+    let out = danced().arg("devices").output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!String::from_utf8_lossy(&out.stdout).trim().is_empty());
+    let out = danced()
+        .args(["run", "--device", "no-such-device-xyz", "--duration", "1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains("audio input"), "{err}");
+}

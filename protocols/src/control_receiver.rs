@@ -6,7 +6,7 @@ use std::io;
 use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
 
 /// The control port when none is configured (clear of VMC's 39539/39540 and VRChat's 9000/9001).
-pub const DEFAULT_CONTROL_PORT: u16 = 9100;
+pub const DEFAULT_CONTROL_PORT: u16 = 9010;
 
 /// Largest UDP payload; a bigger buffer is never needed.
 const MAX_DATAGRAM: usize = 65_536;
@@ -30,7 +30,7 @@ impl ControlReceiver {
         )
     }
 
-    /// Listens on `addr` (e.g. 0.0.0.0:9100 to accept control from the network) with `parser`.
+    /// Listens on `addr` (e.g. 0.0.0.0:9010 to accept control from the network) with `parser`.
     pub fn bind(addr: SocketAddr, parser: ControlParser) -> Result<Self, ProtocolError> {
         let socket = UdpSocket::bind(addr).map_err(|source| ProtocolError::Bind {
             addr: addr.to_string(),

@@ -42,7 +42,7 @@ pub enum AnalysisEvent {
     Beat {
         /// Audio stream time of the beat, seconds.
         time_s: f64,
-        /// 0-based index of the beat in its bar.
+        /// Position of the beat in its bar, 1 = downbeat.
         index_in_bar: u32,
         /// Beats in the current bar.
         beats_per_bar: u32,

@@ -77,11 +77,14 @@ impl VmcEncoder {
 
     fn collect_messages(&mut self, frame: &BodyFrame) {
         self.messages.clear();
-        let (p, q) = self.pose(frame.root_position, frame.root_rotation);
+        // The avatar root stays at the origin: the Hips bone's local transform already carries
+        // the dancer's world position and rotation, and receivers (EVMC4U, VSeeFace, ...) apply
+        // Root and Hips both, so sending the travel in Root too would count it twice.
+        let _ = (frame.root_position, frame.root_rotation);
         self.push(
             "/VMC/Ext/Root/Pos",
             "root",
-            &[p.x, p.y, p.z, q.x, q.y, q.z, q.w],
+            &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
         );
         for bone in &frame.bones {
             let (p, q) = self.pose(bone.local_position, bone.local_rotation);
@@ -242,8 +245,9 @@ mod tests {
         assert_eq!(msgs.len(), 23);
         assert_eq!(msgs[0].addr, "/VMC/Ext/Root/Pos");
         assert_eq!(msgs[0].args[0], OscType::String("root".into()));
-        assert_eq!(msgs[0].args[1], OscType::Float(1.0));
-        assert_eq!(msgs[0].args[3], OscType::Float(2.0));
+        // Root at the origin: the travel is in the Hips bone (never counted twice).
+        assert_eq!(msgs[0].args[1], OscType::Float(0.0));
+        assert_eq!(msgs[0].args[3], OscType::Float(0.0));
         assert_eq!(msgs[0].args[7], OscType::Float(1.0));
         assert_eq!(msgs[8].addr, "/VMC/Ext/Bone/Pos");
         assert_eq!(msgs[8].args[0], OscType::String("LeftUpperArm".into()));

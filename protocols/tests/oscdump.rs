@@ -174,7 +174,10 @@ fn oscdump_reads_native_and_vmc_bundles() {
     assert_eq!(vmc_root.time, want_time);
     assert_eq!(vmc_root.types, "sfffffff");
     assert_eq!(vmc_root.values[0], "root");
-    assert!(close(&floats(vmc_root), &[0.5, 0.0, -1.0, 0.0, s, 0.0, s]));
+    assert!(close(
+        &floats(vmc_root),
+        &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    ));
     let bones: Vec<&Line> = lines
         .iter()
         .filter(|l| l.addr == "/VMC/Ext/Bone/Pos")

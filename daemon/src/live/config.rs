@@ -1,0 +1,349 @@
+//! `configs/danced.toml`: every setting of `danced run`, with command-line flags on top.
+//! Unknown keys are errors (a typo must not silently fall back to a default), and every error
+//! names the file and the key.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use thiserror::Error;
+
+/// A configuration that cannot be used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("reading {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The TOML is malformed, has an unknown key or a value of the wrong type.
+    #[error("{path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// toml's message (it names the key, line and column).
+        message: String,
+    },
+    /// A value is out of range.
+    #[error("{origin}: `{key}` {problem}")]
+    Invalid {
+        /// The file, or "command line".
+        origin: String,
+        /// Dotted key, e.g. `output.rate_hz`.
+        key: &'static str,
+        /// What is wrong with it.
+        problem: String,
+    },
+}
+
+/// The whole configuration.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// Audio input.
+    pub audio: AudioConfig,
+    /// Outputs.
+    pub output: OutputConfig,
+    /// Control inputs.
+    pub control: ControlConfig,
+    /// The dancer.
+    pub dancer: DancerConfig,
+    /// Write the run's stats here as JSON when it ends.
+    pub stats_json: Option<PathBuf>,
+}
+
+/// `[audio]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct AudioConfig {
+    /// Substring of the capture device's name (default input when absent).
+    pub device: Option<String>,
+    /// Replay this file instead of capturing.
+    pub input: Option<PathBuf>,
+    /// Replay speed (audio seconds per wall second).
+    pub speed: f64,
+    /// Replay in a loop.
+    #[serde(rename = "loop")]
+    pub looped: bool,
+    /// Stop after this many seconds of audio.
+    pub duration: Option<f64>,
+}
+
+impl Default for AudioConfig {
+    fn default() -> Self {
+        Self {
+            device: None,
+            input: None,
+            speed: 1.0,
+            looped: false,
+            duration: None,
+        }
+    }
+}
+
+/// `[output]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputConfig {
+    /// Frames sent per second.
+    pub rate_hz: f64,
+    /// Safety margin before a pose is shown, beyond the declared look-ahead, ms.
+    pub margin_ms: f64,
+    /// Plain OSC targets (host:port).
+    pub osc: Vec<String>,
+    /// VMC protocol output.
+    pub vmc: VmcConfig,
+    /// VRChat OSC trackers output.
+    pub vrchat: VrchatConfig,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: 60.0,
+            margin_ms: 8.0,
+            osc: vec!["127.0.0.1:10000".into()],
+            vmc: VmcConfig::default(),
+            vrchat: VrchatConfig::default(),
+        }
+    }
+}
+
+/// `[output.vmc]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct VmcConfig {
+    /// Send VMC.
+    pub enabled: bool,
+    /// Where to (host:port).
+    pub target: String,
+    /// Split each frame into bundles under 1400 bytes (for lossy networks).
+    pub split_bundles: bool,
+}
+
+impl Default for VmcConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            target: "127.0.0.1:39539".into(),
+            split_bundles: false,
+        }
+    }
+}
+
+/// `[output.vrchat]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct VrchatConfig {
+    /// Send VRChat OSC trackers.
+    pub enabled: bool,
+    /// Where to (host:port).
+    pub target: String,
+    /// Tracker number (1–8) → bone name (Unity HumanBodyBones).
+    pub trackers: BTreeMap<String, String>,
+}
+
+impl Default for VrchatConfig {
+    fn default() -> Self {
+        let trackers = [
+            ("1", "Hips"),
+            ("2", "Chest"),
+            ("3", "LeftFoot"),
+            ("4", "RightFoot"),
+            ("5", "LeftLowerLeg"),
+            ("6", "RightLowerLeg"),
+            ("7", "LeftLowerArm"),
+            ("8", "RightLowerArm"),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+        Self {
+            enabled: false,
+            target: "127.0.0.1:9000".into(),
+            trackers,
+        }
+    }
+}
+
+/// `[control]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControlConfig {
+    /// UDP port of the OSC control receiver (0 = off).
+    pub osc_port: u16,
+    /// Address the OSC control receiver binds to.
+    pub bind: String,
+    /// Substring of the MIDI input port's name (off when absent).
+    pub midi_port: Option<String>,
+    /// MIDI mapping file (default: the built-in generic map, `configs/midi/generic.toml`).
+    pub midi_map: Option<PathBuf>,
+    /// Key-pose bank (default: the built-in `configs/poses/bank.toml`).
+    pub poses: Option<PathBuf>,
+}
+
+impl Default for ControlConfig {
+    fn default() -> Self {
+        Self {
+            osc_port: 9010,
+            bind: "127.0.0.1".into(),
+            midi_port: None,
+            midi_map: None,
+            poses: None,
+        }
+    }
+}
+
+/// `[dancer]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DancerConfig {
+    /// Motion source (`retrieval`).
+    pub source: String,
+    /// Initial temperature (0 = most likely motion).
+    pub temperature: f32,
+    /// Random seed.
+    pub seed: u64,
+    /// Transition length of immediate key poses, beats.
+    pub transition_beats: f32,
+}
+
+impl Default for DancerConfig {
+    fn default() -> Self {
+        Self {
+            source: "retrieval".into(),
+            temperature: 0.5,
+            seed: 1,
+            transition_beats: 1.0,
+        }
+    }
+}
+
+impl Config {
+    /// Parses TOML text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &Path) -> Result<Self, ConfigError> {
+        let config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: origin.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        config.validate(&origin.display().to_string())?;
+        Ok(config)
+    }
+
+    /// Reads and checks a file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks every range; `origin` names the file (or "command line") in errors.
+    pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
+        let bad = |key: &'static str, problem: String| ConfigError::Invalid {
+            origin: origin.to_string(),
+            key,
+            problem,
+        };
+        let r = self.output.rate_hz;
+        if !(r.is_finite() && (1.0..=1000.0).contains(&r)) {
+            return Err(bad("output.rate_hz", format!("= {r}: must be in 1..=1000")));
+        }
+        let m = self.output.margin_ms;
+        if !(m.is_finite() && (0.0..=1000.0).contains(&m)) {
+            return Err(bad(
+                "output.margin_ms",
+                format!("= {m}: must be in 0..=1000"),
+            ));
+        }
+        let s = self.audio.speed;
+        if !(s.is_finite() && s > 0.0 && s <= 100.0) {
+            return Err(bad("audio.speed", format!("= {s}: must be in (0, 100]")));
+        }
+        if let Some(d) = self.audio.duration
+            && !(d.is_finite() && d > 0.0)
+        {
+            return Err(bad("audio.duration", format!("= {d}: must be positive")));
+        }
+        if self.audio.input.is_some() && self.audio.device.is_some() {
+            return Err(bad("audio.input", "and audio.device are exclusive".into()));
+        }
+        let t = self.dancer.temperature;
+        if !(t.is_finite() && (0.0..=10.0).contains(&t)) {
+            return Err(bad(
+                "dancer.temperature",
+                format!("= {t}: must be in 0..=10"),
+            ));
+        }
+        let b = self.dancer.transition_beats;
+        if !(b.is_finite() && (0.0..=64.0).contains(&b)) {
+            return Err(bad(
+                "dancer.transition_beats",
+                format!("= {b}: must be in 0..=64"),
+            ));
+        }
+        if self.dancer.source != "retrieval" {
+            return Err(bad(
+                "dancer.source",
+                format!("= {:?}: available: retrieval", self.dancer.source),
+            ));
+        }
+        for (n, bone) in &self.output.vrchat.trackers {
+            let ok_n = n.parse::<u8>().is_ok_and(|n| (1..=8).contains(&n));
+            if !ok_n {
+                return Err(bad(
+                    "output.vrchat.trackers",
+                    format!("key {n:?}: must be 1..=8"),
+                ));
+            }
+            if model::rig::Joint::from_name(bone).is_none() {
+                return Err(bad(
+                    "output.vrchat.trackers",
+                    format!("{n} = {bone:?}: unknown bone"),
+                ));
+            }
+        }
+        for t in self
+            .output
+            .osc
+            .iter()
+            .chain([&self.output.vmc.target, &self.output.vrchat.target])
+        {
+            if t.rsplit_once(':')
+                .is_none_or(|(_, p)| p.parse::<u16>().is_err())
+            {
+                return Err(bad("output", format!("target {t:?} is not host:port")));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_config_parses_to_the_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/danced.toml");
+        let c = Config::load(&path).unwrap();
+        assert_eq!(c.output, OutputConfig::default());
+        assert_eq!(c.dancer, DancerConfig::default());
+        assert_eq!(c.control, ControlConfig::default());
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let e = Config::parse("[output]\nrate_hzz = 30\n", Path::new("x.toml")).unwrap_err();
+        assert!(e.to_string().contains("rate_hzz"), "{e}");
+        let e = Config::parse("[output]\nrate_hz = 0\n", Path::new("x.toml")).unwrap_err();
+        assert!(e.to_string().contains("output.rate_hz"), "{e}");
+        let e =
+            Config::parse("[dancer]\ntemperature = \"hot\"\n", Path::new("x.toml")).unwrap_err();
+        assert!(e.to_string().contains("temperature"), "{e}");
+    }
+}

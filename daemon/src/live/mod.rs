@@ -1,0 +1,18 @@
+//! The live pipeline: audio in (sound card or file replay) → ring → analysis → motion →
+//! paced sender → [`sink::FrameSink`], with live controls, stats and a status line.
+
+pub mod analysis;
+pub mod capture;
+pub mod config;
+pub mod devices;
+pub mod io;
+pub mod motion;
+pub mod pipeline;
+pub mod replay;
+pub mod ring;
+pub mod scheduler;
+pub mod sink;
+pub mod stats;
+pub mod status;
+pub mod timeline;
+pub mod wire;

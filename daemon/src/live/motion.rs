@@ -1,0 +1,258 @@
+//! The motion thread: one `MotionSource::step` per model frame, as soon as the frame's
+//! look-ahead has been analysed, with the performer's controls applied (key poses quantised to
+//! the beat grid the analysis predicts).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, RecvTimeoutError};
+use dsp::feature::FEATURE_DIM;
+use glam::Quat;
+use model::rig::{JOINT_COUNT, Pose};
+use model::source::{Controls, KeyPoseTarget, MotionSource};
+
+use super::analysis::{BeatGrid, FeatureMsg};
+use super::sink::PoseBank;
+use super::stats::{KEY_POSE_NONE, KEY_POSE_PENDING, KEY_POSE_REACHED, Stats};
+use super::timeline::{TimedPose, Timeline};
+use super::wire::{ControlEvent, Quantize};
+
+/// Beat period assumed when neither the analysis nor a tempo hint gives one (120 BPM).
+const FALLBACK_PERIOD_S: f64 = 0.5;
+
+/// The audio time at which a control quantised with `q` takes effect, seen from model time
+/// `now_s`, given the latest beat grid, a tempo hint (BPM, 0 = none) and the transition length
+/// used by [`Quantize::Now`].
+pub fn quantize_target(
+    q: &Quantize,
+    now_s: f64,
+    grid: &BeatGrid,
+    tempo_hint_bpm: f32,
+    transition_beats: f32,
+    model_rate: f64,
+) -> f64 {
+    let period = if grid.locked && grid.period_s > 0.0 {
+        grid.period_s
+    } else if tempo_hint_bpm > 0.0 {
+        60.0 / f64::from(tempo_hint_bpm)
+    } else {
+        FALLBACK_PERIOD_S
+    };
+    // The first beat at least half a model frame ahead (a beat "now" is too late to reach).
+    let earliest = now_s + 0.5 / model_rate;
+    let (first, index) = if grid.locked {
+        let m = ((earliest - grid.next_beat_s) / period).floor() + 1.0;
+        let bpb = i64::from(grid.beats_per_bar.max(1));
+        let idx = (i64::from(grid.next_index_in_bar.max(1)) - 1 + m as i64).rem_euclid(bpb) + 1;
+        (grid.next_beat_s + m * period, idx as u32)
+    } else {
+        (now_s + period, 1)
+    };
+    match q {
+        Quantize::Now => now_s + f64::from(transition_beats.max(0.0)) * period,
+        Quantize::NextBeat => first,
+        Quantize::InBeats(0) => now_s,
+        Quantize::InBeats(n) => first + f64::from(n - 1) * period,
+        Quantize::NextBar => {
+            let bpb = grid.beats_per_bar.max(1);
+            let to_downbeat = (bpb + 1 - index.min(bpb)) % bpb;
+            first + f64::from(to_downbeat) * period
+        }
+    }
+}
+
+/// Settings of the motion thread.
+#[derive(Clone, Copy, Debug)]
+pub struct MotionSettings {
+    /// Initial temperature.
+    pub temperature: f32,
+    /// Initial transition length (beats) for `Quantize::Now` key poses.
+    pub transition_beats: f32,
+}
+
+struct KeyPose {
+    rotations: [Quat; JOINT_COUNT],
+    target_s: f64,
+}
+
+struct State {
+    controls: Controls,
+    transition_beats: f32,
+    tempo_hint: f32,
+    paused: bool,
+    key: Option<KeyPose>,
+}
+
+/// Runs the motion thread until the feature channel closes or `stop` is set.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    mut source: Box<dyn MotionSource + Send>,
+    poses: Box<dyn PoseBank + Send>,
+    settings: MotionSettings,
+    epoch: Instant,
+    timeline: Arc<Mutex<Timeline>>,
+    stats: Arc<Stats>,
+    stop: Arc<AtomicBool>,
+    features: Receiver<FeatureMsg>,
+    controls: Receiver<ControlEvent>,
+) {
+    let rate = source.frame_rate();
+    let need = source.lookahead_frames() + 1;
+    let mut window: Vec<[f32; FEATURE_DIM]> = Vec::with_capacity(need);
+    let mut times: Vec<f64> = Vec::with_capacity(need);
+    let mut pose = Pose::rest();
+    let mut grid = BeatGrid::default();
+    let mut st = State {
+        controls: Controls {
+            temperature: settings.temperature,
+            key_pose: None,
+        },
+        transition_beats: settings.transition_beats,
+        tempo_hint: 0.0,
+        paused: false,
+        key: None,
+    };
+    stats.temperature.set(st.controls.temperature);
+    let mut next_time = 0.0f64;
+    while !stop.load(Ordering::Relaxed) {
+        while let Ok(c) = controls.try_recv() {
+            let now_s = times.first().copied().unwrap_or(next_time);
+            let ok = apply(&mut st, c, &*poses, &mut *source, now_s, &grid, rate);
+            let counter = if ok {
+                &stats.controls_accepted
+            } else {
+                &stats.controls_rejected
+            };
+            counter.fetch_add(1, Ordering::Relaxed);
+        }
+        stats.temperature.set(st.controls.temperature);
+        stats.paused.store(u32::from(st.paused), Ordering::Relaxed);
+        let msg = match features.recv_timeout(Duration::from_millis(5)) {
+            Ok(m) => m,
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        grid = msg.grid;
+        window.push(msg.values);
+        times.push(msg.time_s);
+        if window.len() < need {
+            continue;
+        }
+        let t = times[0];
+        st.controls.key_pose = st.key.as_ref().map(|k| KeyPoseTarget {
+            rotations: k.rotations,
+            frames_to_go: ((k.target_s - t) * rate).round().max(0.0) as u32,
+        });
+        match st.controls.key_pose {
+            Some(k) => {
+                stats
+                    .key_pose_state
+                    .store(KEY_POSE_PENDING, Ordering::Relaxed);
+                stats
+                    .key_pose_frames_to_go
+                    .store(k.frames_to_go, Ordering::Relaxed);
+            }
+            None if stats.key_pose_state.load(Ordering::Relaxed) == KEY_POSE_PENDING => {
+                stats.key_pose_state.store(KEY_POSE_NONE, Ordering::Relaxed);
+            }
+            None => {}
+        }
+        if !st.paused {
+            source.step(&window, &st.controls, &mut pose);
+        }
+        if st.controls.key_pose.is_some_and(|k| k.frames_to_go == 0) {
+            // A key pose is a one-shot hit: reached on this frame, then the dance goes on.
+            st.key = None;
+            stats
+                .key_pose_state
+                .store(KEY_POSE_REACHED, Ordering::Relaxed);
+        }
+        if let Ok(mut tl) = timeline.lock() {
+            tl.poses.push(TimedPose { time_s: t, pose });
+        }
+        let now_ns = epoch.elapsed().as_nanos() as u64;
+        stats
+            .processing
+            .record_s(now_ns.saturating_sub(msg.ingest_wall_ns) as f64 * 1e-9);
+        stats.model_frames.fetch_add(1, Ordering::Relaxed);
+        next_time = t + 1.0 / rate;
+        window.remove(0);
+        times.remove(0);
+    }
+}
+
+fn apply(
+    st: &mut State,
+    event: ControlEvent,
+    poses: &dyn PoseBank,
+    source: &mut dyn MotionSource,
+    now_s: f64,
+    grid: &BeatGrid,
+    rate: f64,
+) -> bool {
+    match event {
+        ControlEvent::Temperature(t) if t.is_finite() && (0.0..=10.0).contains(&t) => {
+            st.controls.temperature = t;
+        }
+        ControlEvent::KeyPose { name, quantize } => {
+            let Some(rotations) = poses.get(&name) else {
+                tracing::warn!("unknown key pose {name:?}");
+                return false;
+            };
+            let target_s = quantize_target(
+                &quantize,
+                now_s,
+                grid,
+                st.tempo_hint,
+                st.transition_beats,
+                rate,
+            );
+            st.key = Some(KeyPose {
+                rotations,
+                target_s,
+            });
+        }
+        ControlEvent::ClearKeyPose => st.key = None,
+        ControlEvent::TransitionBeats(b) if b.is_finite() && (0.0..=64.0).contains(&b) => {
+            st.transition_beats = b;
+        }
+        ControlEvent::StyleSeed(seed) => source.reset(seed),
+        ControlEvent::Pause => st.paused = true,
+        ControlEvent::Resume => st.paused = false,
+        ControlEvent::TempoHint(bpm) if bpm.is_finite() && (0.0..=400.0).contains(&bpm) => {
+            st.tempo_hint = bpm;
+        }
+        _ => return false,
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid() -> BeatGrid {
+        // Beats every 0.5 s at …, 10.0, 10.5 (index 2 of 4 at 10.0).
+        BeatGrid {
+            next_beat_s: 10.0,
+            period_s: 0.5,
+            next_index_in_bar: 2,
+            beats_per_bar: 4,
+            locked: true,
+        }
+    }
+
+    #[test]
+    fn quantises_to_beats_and_bars() {
+        let g = grid();
+        let q = |q: Quantize, now| quantize_target(&q, now, &g, 0.0, 1.0, 25.0);
+        assert!((q(Quantize::NextBeat, 9.2) - 9.5).abs() < 1e-9);
+        assert!((q(Quantize::NextBeat, 9.99) - 10.5).abs() < 1e-9);
+        assert!((q(Quantize::InBeats(3), 9.2) - 10.5).abs() < 1e-9);
+        // 9.5 is beat 1 (10.0 is beat 2), so the next downbeat after 9.6 is 11.5.
+        assert!((q(Quantize::NextBar, 9.6) - 11.5).abs() < 1e-9);
+        assert!((q(Quantize::NextBar, 9.2) - 9.5).abs() < 1e-9);
+        assert!((q(Quantize::Now, 9.2) - 9.7).abs() < 1e-9);
+    }
+}

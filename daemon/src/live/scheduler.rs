@@ -1,0 +1,194 @@
+//! The sender thread: on a fixed grid (default 60 Hz) of a monotonic clock, it picks the audio
+//! time to show (the audio clock delayed by the declared look-ahead plus a safety margin),
+//! interpolates the poses around it, builds a [`BodyFrame`] in Unity coordinates and hands it,
+//! and any pending analysis events, to the sink.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+use crossbeam_channel::Receiver;
+use glam::{Quat, Vec3};
+use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton, to_unity_position, to_unity_rotation};
+
+use super::sink::FrameSink;
+use super::stats::Stats;
+use super::timeline::Timeline;
+use super::wire::{AnalysisEvent, BodyFrame, BoneSample};
+
+/// How long before a deadline the thread stops sleeping and spins (sleep overshoot margin).
+const SPIN_BEFORE: Duration = Duration::from_micros(400);
+/// How far the audio clock may be extrapolated past the newest audio block, audio seconds.
+const MAX_EXTRAPOLATION_S: f64 = 0.1;
+
+/// Settings of the sender thread.
+#[derive(Clone, Copy, Debug)]
+pub struct SchedulerSettings {
+    /// Frames sent per second.
+    pub rate_hz: f64,
+    /// Declared look-ahead, audio seconds (see `stats`).
+    pub declared_lookahead_s: f64,
+    /// Safety margin on top of it, wall seconds.
+    pub margin_s: f64,
+    /// Audio seconds per wall second.
+    pub speed: f64,
+}
+
+/// Builds [`BodyFrame`]s from poses without allocating after the first frame.
+pub struct FrameBuilder {
+    skeleton: Skeleton,
+    frame: BodyFrame,
+    positions: [Vec3; JOINT_COUNT],
+    rotations: [Quat; JOINT_COUNT],
+}
+
+impl Default for FrameBuilder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl FrameBuilder {
+    /// A builder on the default adult rig.
+    pub fn new() -> Self {
+        Self {
+            skeleton: Skeleton::default_adult(),
+            frame: BodyFrame {
+                frame_index: 0,
+                audio_time_s: 0.0,
+                timetag: SystemTime::UNIX_EPOCH,
+                root_position: Vec3::ZERO,
+                root_rotation: Quat::IDENTITY,
+                bones: Vec::with_capacity(JOINT_COUNT),
+            },
+            positions: [Vec3::ZERO; JOINT_COUNT],
+            rotations: [Quat::IDENTITY; JOINT_COUNT],
+        }
+    }
+
+    /// The frame for `pose`, stamped with `audio_time_s` and the current wall-clock time.
+    pub fn build(&mut self, index: u64, audio_time_s: f64, pose: &Pose) -> &BodyFrame {
+        self.skeleton
+            .forward_kinematics(pose, &mut self.positions, &mut self.rotations);
+        let f = &mut self.frame;
+        f.frame_index = index;
+        f.audio_time_s = audio_time_s;
+        f.timetag = SystemTime::now();
+        f.root_position = to_unity_position(pose.root_position);
+        f.root_rotation = to_unity_rotation(self.rotations[0]);
+        f.bones.clear();
+        for joint in Joint::ALL {
+            let i = joint.index();
+            let local_position = if joint.parent().is_some() {
+                self.skeleton.offsets[i]
+            } else {
+                pose.root_position
+            };
+            f.bones.push(BoneSample {
+                bone: joint.name(),
+                local_position: to_unity_position(local_position),
+                local_rotation: to_unity_rotation(pose.local_rotations[i]),
+                world_position: to_unity_position(self.positions[i]),
+                world_rotation: to_unity_rotation(self.rotations[i]),
+            });
+        }
+        &self.frame
+    }
+}
+
+/// Blends two poses: root lerped, rotations slerped.
+pub fn blend(a: &Pose, b: &Pose, w: f32, out: &mut Pose) {
+    out.root_position = a.root_position.lerp(b.root_position, w);
+    for i in 0..JOINT_COUNT {
+        out.local_rotations[i] = a.local_rotations[i].slerp(b.local_rotations[i], w);
+    }
+}
+
+/// Sleeps until `deadline`: a coarse sleep, then a short spin for precision.
+fn wait_until(deadline: Instant) {
+    let now = Instant::now();
+    if deadline > now + SPIN_BEFORE {
+        std::thread::sleep(deadline - now - SPIN_BEFORE);
+    }
+    while Instant::now() < deadline {
+        std::hint::spin_loop();
+    }
+}
+
+/// Runs the sender thread until `stop` is set; gives the sink back at the end.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    mut sink: Box<dyn FrameSink>,
+    settings: SchedulerSettings,
+    epoch: Instant,
+    timeline: Arc<Mutex<Timeline>>,
+    stats: Arc<Stats>,
+    stop: Arc<AtomicBool>,
+    events: Receiver<AnalysisEvent>,
+) -> Box<dyn FrameSink> {
+    // Tighter timer slack makes the coarse sleep land closer to its deadline (Linux only).
+    #[cfg(target_os = "linux")]
+    // SAFETY: PR_SET_TIMERSLACK only changes this thread's timer slack.
+    unsafe {
+        libc::prctl(libc::PR_SET_TIMERSLACK, 50_000 as libc::c_ulong);
+    }
+    let period = Duration::from_secs_f64(1.0 / settings.rate_hz);
+    let delay_ns =
+        ((settings.declared_lookahead_s / settings.speed + settings.margin_s) * 1e9) as u64;
+    let declared_wall_s = settings.declared_lookahead_s / settings.speed;
+    let mut builder = FrameBuilder::new();
+    let mut pose = Pose::rest();
+    let mut index = 0u64;
+    let mut last_t = f64::NEG_INFINITY;
+    let mut deadline = Instant::now() + period;
+    while !stop.load(Ordering::Relaxed) {
+        wait_until(deadline);
+        let sent_at = Instant::now();
+        let now_ns = sent_at.duration_since(epoch).as_nanos() as u64;
+        let picked = timeline.lock().ok().and_then(|tl| {
+            let mut t = tl.audio_time_at(now_ns.saturating_sub(delay_ns), MAX_EXTRAPOLATION_S)?;
+            if t <= last_t {
+                // The clock stalls when audio stops; frames still need increasing times.
+                t = last_t + 1e-6;
+            }
+            let (a, b, w, late) = tl.bracket(t)?;
+            blend(&a.pose, &b.pose, w, &mut pose);
+            let shown = if late { b.time_s } else { t };
+            let ingest = tl.ingest_wall_ns(shown)?;
+            Some((t, late, ingest))
+        });
+        if let Some((t, late, ingest_ns)) = picked {
+            last_t = t;
+            let frame = builder.build(index, t, &pose);
+            sink.send_frame(frame);
+            let done_ns = epoch.elapsed().as_nanos() as u64;
+            index += 1;
+            stats.frames_sent.fetch_add(1, Ordering::Relaxed);
+            if late {
+                stats.late_frames.fetch_add(1, Ordering::Relaxed);
+            }
+            let latency = (done_ns as f64 - ingest_ns as f64) * 1e-9 - declared_wall_s;
+            stats.latency.record_s(latency);
+            let jitter = if sent_at > deadline {
+                sent_at - deadline
+            } else {
+                deadline - sent_at
+            };
+            stats.jitter.record_s(jitter.as_secs_f64());
+        }
+        while let Ok(e) = events.try_recv() {
+            sink.send_event(&e);
+        }
+        stats
+            .packets_sent
+            .store(sink.packets_sent(), Ordering::Relaxed);
+        deadline += period;
+        let now = Instant::now();
+        if now > deadline + period {
+            // Fell more than a tick behind (machine stalled): rejoin the grid instead of bursting.
+            let behind = (now - deadline).as_nanos() / period.as_nanos();
+            deadline += period * behind as u32;
+        }
+    }
+    sink
+}

@@ -1,0 +1,359 @@
+//! Lock-free counters and histograms of the live pipeline, and the report they turn into.
+//!
+//! Definitions (all wall times on one monotonic clock, [`std::time::Instant`]):
+//!
+//! - **declared look-ahead** `D` (audio seconds): what the design itself must wait before a pose
+//!   for audio time `t` can exist: the motion source's look-ahead (`lookahead_frames / rate`),
+//!   one model frame (the scheduler interpolates between the two poses around `t`, so the later
+//!   one must exist), the analysis's short-window latency (half a 1024-sample window plus the
+//!   resampler delay) and one analysis hop (features are computed once per 11.6 ms hop).
+//! - **added latency** of a sent frame: `send_wall − ingest_wall(t_shown) − D / speed`, where
+//!   `t_shown` is the audio time the frame actually depicts (the scheduled time, or the newest
+//!   pose's time when the motion was late and the pose was held) and `ingest_wall(t)` is the
+//!   wall time the block holding the sample at `t` entered the audio ring. It is what the
+//!   pipeline costs beyond the model's own look-ahead: the scheduler's safety margin, thread
+//!   wake-ups, the 60 Hz tick, and any lateness of analysis or motion.
+//! - **processing latency** of a model frame: `pose_ready_wall − ingest_wall(S)`, where `S` is
+//!   the block that completed the newest feature frame the pose needed: how long analysis and
+//!   motion actually took (what the safety margin must cover).
+//! - **jitter** of a sent frame: `|send_wall − scheduled_wall|` on the scheduler's fixed grid.
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+
+use serde::Serialize;
+
+/// A fixed-range histogram of durations with atomic buckets: recording never allocates or locks.
+pub struct Histogram {
+    min_ns: i64,
+    bucket_ns: i64,
+    buckets: Box<[AtomicU32]>,
+    count: AtomicU64,
+    max_ns: AtomicU64,
+    max_set: AtomicU32,
+}
+
+impl Histogram {
+    /// Buckets of `bucket_us` from `min_ms` to `max_ms` (values outside go to the end buckets;
+    /// the maximum is tracked exactly).
+    pub fn new(min_ms: f64, max_ms: f64, bucket_us: f64) -> Self {
+        let n = (((max_ms - min_ms) * 1000.0 / bucket_us).ceil() as usize).max(1);
+        Self {
+            min_ns: (min_ms * 1e6) as i64,
+            bucket_ns: (bucket_us * 1e3).max(1.0) as i64,
+            buckets: (0..n).map(|_| AtomicU32::new(0)).collect(),
+            count: AtomicU64::new(0),
+            max_ns: AtomicU64::new(0),
+            max_set: AtomicU32::new(0),
+        }
+    }
+
+    /// Records one value in seconds.
+    pub fn record_s(&self, s: f64) {
+        let ns = (s * 1e9) as i64;
+        let i = ((ns - self.min_ns) / self.bucket_ns).clamp(0, self.buckets.len() as i64 - 1);
+        self.buckets[i as usize].fetch_add(1, Ordering::Relaxed);
+        self.count.fetch_add(1, Ordering::Relaxed);
+        // Max stored with the sign bit flipped so unsigned comparison orders signed values.
+        let key = (ns as u64) ^ (1 << 63);
+        self.max_ns.fetch_max(key, Ordering::Relaxed);
+        self.max_set.store(1, Ordering::Relaxed);
+    }
+
+    /// Values recorded.
+    pub fn count(&self) -> u64 {
+        self.count.load(Ordering::Relaxed)
+    }
+
+    /// The `q` quantile (0..=1) in milliseconds (upper edge of its bucket); 0 when empty.
+    pub fn quantile_ms(&self, q: f64) -> f64 {
+        let total = self.count();
+        if total == 0 {
+            return 0.0;
+        }
+        let target = ((q * total as f64).ceil() as u64).clamp(1, total);
+        let mut seen = 0u64;
+        for (i, b) in self.buckets.iter().enumerate() {
+            seen += u64::from(b.load(Ordering::Relaxed));
+            if seen >= target {
+                let upper = self.min_ns + (i as i64 + 1) * self.bucket_ns;
+                return (upper as f64 / 1e6).min(self.max_ms());
+            }
+        }
+        self.max_ms()
+    }
+
+    /// The largest value recorded, ms (0 when empty).
+    pub fn max_ms(&self) -> f64 {
+        if self.max_set.load(Ordering::Relaxed) == 0 {
+            return 0.0;
+        }
+        let ns = (self.max_ns.load(Ordering::Relaxed) ^ (1 << 63)) as i64;
+        ns as f64 / 1e6
+    }
+}
+
+/// An `f32` in an atomic, for live values shown on the status line.
+#[derive(Debug, Default)]
+pub struct AtomicF32(AtomicU32);
+
+impl AtomicF32 {
+    /// Stores a value.
+    pub fn set(&self, v: f32) {
+        self.0.store(v.to_bits(), Ordering::Relaxed);
+    }
+    /// Loads the value.
+    pub fn get(&self) -> f32 {
+        f32::from_bits(self.0.load(Ordering::Relaxed))
+    }
+}
+
+/// Key pose state for the status line: 0 none, 1 pending, 2 reached.
+pub const KEY_POSE_NONE: u32 = 0;
+/// A key pose is pending (frames to go in `key_pose_frames_to_go`).
+pub const KEY_POSE_PENDING: u32 = 1;
+/// The last key pose was reached.
+pub const KEY_POSE_REACHED: u32 = 2;
+
+/// Everything the pipeline counts, shared by all its threads.
+pub struct Stats {
+    /// Added latency of sent frames (see the module docs).
+    pub latency: Histogram,
+    /// Processing latency of model frames.
+    pub processing: Histogram,
+    /// Send-time jitter of sent frames.
+    pub jitter: Histogram,
+    dropped_frames: AtomicU64,
+    /// Stream errors reported by the audio backend.
+    pub stream_errors: AtomicU64,
+    /// Times the capture stream was rebuilt.
+    pub reconnects: AtomicU64,
+    /// Frames handed to the sink.
+    pub frames_sent: AtomicU64,
+    /// Frames whose pose was not ready at send time (the newest pose was held).
+    pub late_frames: AtomicU64,
+    /// Packets the sink reports.
+    pub packets_sent: AtomicU64,
+    /// Model frames stepped.
+    pub model_frames: AtomicU64,
+    /// Frames of silence the analysis inserted while no audio arrived.
+    pub silence_frames: AtomicU64,
+    /// Analysis events dropped because the sender thread was behind.
+    pub events_dropped: AtomicU64,
+    /// Control events applied.
+    pub controls_accepted: AtomicU64,
+    /// Control events refused (unknown pose name, invalid value).
+    pub controls_rejected: AtomicU64,
+    /// Current tempo, BPM.
+    pub tempo_bpm: AtomicF32,
+    /// Current beat phase in [0, 1).
+    pub beat_phase: AtomicF32,
+    /// Current temperature.
+    pub temperature: AtomicF32,
+    /// Key pose state (`KEY_POSE_*`).
+    pub key_pose_state: AtomicU32,
+    /// Frames left to a pending key pose.
+    pub key_pose_frames_to_go: AtomicU32,
+    /// 1 while paused.
+    pub paused: AtomicU32,
+    rss: Mutex<Vec<(f64, u64)>>,
+}
+
+impl Default for Stats {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Stats {
+    /// Empty counters; histograms cover −20…180 ms latency and 0…50 ms jitter.
+    pub fn new() -> Self {
+        Self {
+            latency: Histogram::new(-20.0, 180.0, 20.0),
+            processing: Histogram::new(0.0, 200.0, 20.0),
+            jitter: Histogram::new(0.0, 50.0, 5.0),
+            dropped_frames: AtomicU64::new(0),
+            stream_errors: AtomicU64::new(0),
+            reconnects: AtomicU64::new(0),
+            frames_sent: AtomicU64::new(0),
+            late_frames: AtomicU64::new(0),
+            packets_sent: AtomicU64::new(0),
+            model_frames: AtomicU64::new(0),
+            silence_frames: AtomicU64::new(0),
+            events_dropped: AtomicU64::new(0),
+            controls_accepted: AtomicU64::new(0),
+            controls_rejected: AtomicU64::new(0),
+            tempo_bpm: AtomicF32::default(),
+            beat_phase: AtomicF32::default(),
+            temperature: AtomicF32::default(),
+            key_pose_state: AtomicU32::new(KEY_POSE_NONE),
+            key_pose_frames_to_go: AtomicU32::new(0),
+            paused: AtomicU32::new(0),
+            // One sample a second: two hours before this ever grows.
+            rss: Mutex::new(Vec::with_capacity(7200)),
+        }
+    }
+
+    /// Counts frames dropped at the ring (reader behind).
+    pub fn add_dropped_frames(&self, frames: u64) {
+        self.dropped_frames.fetch_add(frames, Ordering::Relaxed);
+    }
+
+    /// Audio frames dropped at the ring so far.
+    pub fn dropped_frames(&self) -> u64 {
+        self.dropped_frames.load(Ordering::Relaxed)
+    }
+
+    /// Records the process's resident set size at `elapsed_s` (called about once a second).
+    pub fn sample_rss(&self, elapsed_s: f64) {
+        if let Some(rss) = rss_bytes()
+            && let Ok(mut v) = self.rss.lock()
+        {
+            v.push((elapsed_s, rss));
+        }
+    }
+
+    /// The summary of a run lasting `wall_s` that used `cpu_s` of process CPU time.
+    pub fn report(&self, wall_s: f64, cpu_s: f64) -> StatsReport {
+        let rss = self.rss.lock().map(|v| v.clone()).unwrap_or_default();
+        let end_t = rss.last().map_or(0.0, |r| r.0);
+        let max_in = |from: f64, to: f64| {
+            rss.iter()
+                .filter(|r| r.0 >= from && r.0 <= to)
+                .map(|r| r.1)
+                .max()
+                .unwrap_or(0)
+        };
+        let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        StatsReport {
+            wall_s,
+            latency_ms_p50: self.latency.quantile_ms(0.5),
+            latency_ms_p99: self.latency.quantile_ms(0.99),
+            latency_ms_max: self.latency.max_ms(),
+            processing_ms_p50: self.processing.quantile_ms(0.5),
+            processing_ms_p99: self.processing.quantile_ms(0.99),
+            processing_ms_max: self.processing.max_ms(),
+            jitter_ms_p50: self.jitter.quantile_ms(0.5),
+            jitter_ms_p99: self.jitter.quantile_ms(0.99),
+            jitter_ms_max: self.jitter.max_ms(),
+            cpu_percent: if wall_s > 0.0 {
+                100.0 * cpu_s / wall_s
+            } else {
+                0.0
+            },
+            rss_start: rss.first().map_or(0, |r| r.1),
+            rss_end: rss.last().map_or(0, |r| r.1),
+            rss_max: rss.iter().map(|r| r.1).max().unwrap_or(0),
+            rss_first_minute_max: max_in(0.0, 60.0),
+            rss_last_minute_max: max_in(end_t - 60.0, end_t),
+            drops: self.dropped_frames(),
+            stream_errors: load(&self.stream_errors),
+            reconnects: load(&self.reconnects),
+            frames_sent: load(&self.frames_sent),
+            late_frames: load(&self.late_frames),
+            model_frames: load(&self.model_frames),
+            silence_frames: load(&self.silence_frames),
+            packets_sent: load(&self.packets_sent),
+            events_dropped: load(&self.events_dropped),
+            callback_allocations: crate::alloc_counter::callback_allocations(),
+            allocation_counting: crate::alloc_counter::is_installed(),
+            controls_accepted: load(&self.controls_accepted),
+            controls_rejected: load(&self.controls_rejected),
+            osc_control_accepted: 0,
+            osc_control_ignored: 0,
+            midi_events: 0,
+            midi_bytes_dropped: 0,
+        }
+    }
+}
+
+/// What `--stats-json` writes and `danced bench live` prints.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct StatsReport {
+    /// Wall time of the run, seconds.
+    pub wall_s: f64,
+    /// Added latency, median, ms.
+    pub latency_ms_p50: f64,
+    /// Added latency, 99th percentile, ms.
+    pub latency_ms_p99: f64,
+    /// Added latency, maximum, ms.
+    pub latency_ms_max: f64,
+    /// Processing latency, median, ms.
+    pub processing_ms_p50: f64,
+    /// Processing latency, 99th percentile, ms.
+    pub processing_ms_p99: f64,
+    /// Processing latency, maximum, ms.
+    pub processing_ms_max: f64,
+    /// Send jitter, median, ms.
+    pub jitter_ms_p50: f64,
+    /// Send jitter, 99th percentile, ms.
+    pub jitter_ms_p99: f64,
+    /// Send jitter, maximum, ms.
+    pub jitter_ms_max: f64,
+    /// Process CPU time over wall time, percent of one core.
+    pub cpu_percent: f64,
+    /// Resident set size at the first sample, bytes.
+    pub rss_start: u64,
+    /// Resident set size at the last sample, bytes.
+    pub rss_end: u64,
+    /// Largest resident set size sampled, bytes.
+    pub rss_max: u64,
+    /// Largest RSS in the first minute, bytes.
+    pub rss_first_minute_max: u64,
+    /// Largest RSS in the last minute, bytes.
+    pub rss_last_minute_max: u64,
+    /// Audio frames dropped at the ring.
+    pub drops: u64,
+    /// Audio backend stream errors.
+    pub stream_errors: u64,
+    /// Capture stream rebuilds.
+    pub reconnects: u64,
+    /// Pose frames sent.
+    pub frames_sent: u64,
+    /// Sent frames whose pose was late (held).
+    pub late_frames: u64,
+    /// Model frames stepped.
+    pub model_frames: u64,
+    /// Frames of silence inserted while no audio arrived.
+    pub silence_frames: u64,
+    /// Packets the sink sent.
+    pub packets_sent: u64,
+    /// Analysis events dropped on the way to the sink.
+    pub events_dropped: u64,
+    /// Allocations in the audio callback path.
+    pub callback_allocations: u64,
+    /// Whether allocations were counted at all (the counting allocator is installed).
+    pub allocation_counting: bool,
+    /// Control events applied.
+    pub controls_accepted: u64,
+    /// Control events refused.
+    pub controls_rejected: u64,
+    /// OSC control events parsed from the control port.
+    pub osc_control_accepted: u64,
+    /// OSC control packets or messages ignored (malformed, unknown address, wrong arguments).
+    pub osc_control_ignored: u64,
+    /// Control events made from MIDI input.
+    pub midi_events: u64,
+    /// MIDI bytes the parser dropped (garbage, truncated messages).
+    pub midi_bytes_dropped: u64,
+}
+
+/// Resident set size of this process, bytes (Linux `/proc/self/statm`; `None` elsewhere).
+pub fn rss_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: u64 = s.split_whitespace().nth(1)?.parse().ok()?;
+    // SAFETY: sysconf has no preconditions.
+    let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
+    Some(pages * if page > 0 { page as u64 } else { 4096 })
+}
+
+/// User plus system CPU time of the whole process so far, seconds.
+pub fn process_cpu_s() -> f64 {
+    // SAFETY: getrusage only writes the struct we pass.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) } != 0 {
+        return 0.0;
+    }
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    tv(usage.ru_utime) + tv(usage.ru_stime)
+}

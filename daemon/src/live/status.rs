@@ -1,0 +1,93 @@
+//! The live status line on stderr: rewritten in place about 4 times a second on a terminal,
+//! a plain line every 5 s otherwise (logs stay readable).
+
+use std::io::{IsTerminal, Write};
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use super::stats::{KEY_POSE_PENDING, KEY_POSE_REACHED, Stats};
+
+/// One status line from the current counters.
+pub fn status_line(stats: &Stats) -> String {
+    let key = match stats.key_pose_state.load(Ordering::Relaxed) {
+        KEY_POSE_PENDING => format!(
+            "pending ({} frames)",
+            stats.key_pose_frames_to_go.load(Ordering::Relaxed)
+        ),
+        KEY_POSE_REACHED => "reached".to_string(),
+        _ => "none".to_string(),
+    };
+    let paused = if stats.paused.load(Ordering::Relaxed) == 1 {
+        " PAUSED"
+    } else {
+        ""
+    };
+    format!(
+        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | key pose {key} | drops {} | packets {}{paused}",
+        stats.tempo_bpm.get(),
+        stats.beat_phase.get(),
+        stats.latency.quantile_ms(0.99),
+        stats.temperature.get(),
+        stats.dropped_frames(),
+        stats.packets_sent.load(Ordering::Relaxed),
+    )
+}
+
+/// Prints the status line at the right pace for where stderr goes.
+#[derive(Debug)]
+pub struct StatusPrinter {
+    tty: bool,
+    last: Option<Instant>,
+    printed: bool,
+}
+
+impl Default for StatusPrinter {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl StatusPrinter {
+    /// A printer for this process's stderr.
+    pub fn new() -> Self {
+        Self {
+            tty: std::io::stderr().is_terminal(),
+            last: None,
+            printed: false,
+        }
+    }
+
+    /// How often the caller should call [`StatusPrinter::tick`].
+    pub fn interval(&self) -> Duration {
+        Duration::from_millis(250)
+    }
+
+    /// Prints the line if it is due.
+    pub fn tick(&mut self, stats: &Stats) {
+        let every = if self.tty {
+            Duration::from_millis(250)
+        } else {
+            Duration::from_secs(5)
+        };
+        if self.last.is_some_and(|l| l.elapsed() < every) {
+            return;
+        }
+        self.last = Some(Instant::now());
+        let line = status_line(stats);
+        let mut err = std::io::stderr().lock();
+        let _ = if self.tty {
+            write!(err, "\r\x1b[2K{line}")
+        } else {
+            writeln!(err, "{line}")
+        };
+        let _ = err.flush();
+        self.printed = true;
+    }
+
+    /// Ends the in-place line so later output starts on a fresh line.
+    pub fn finish(&mut self) {
+        if self.tty && self.printed {
+            eprintln!();
+        }
+    }
+}

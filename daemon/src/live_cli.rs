@@ -1,0 +1,237 @@
+//! The `danced run`, `danced demo`, `danced bench live` and `danced devices` commands: the
+//! binary's edge of the live pipeline (config + flags → threads → status line → stats).
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+
+use crate::live::capture::{self, CaptureSettings};
+use crate::live::config::Config;
+use crate::live::io::{ControlInputs, OscSink};
+use crate::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
+use crate::live::replay::{self, ReplayAudio, ReplaySettings};
+use crate::live::stats::StatsReport;
+use crate::live::status::StatusPrinter;
+use crate::live::wire::ControlEvent;
+
+/// Where the audio comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AudioSource {
+    /// The sound card (device name substring, or the default input).
+    Capture(Option<String>),
+    /// A file replayed in real time (or faster).
+    File(PathBuf),
+    /// The built-in demo song, looped.
+    Demo,
+}
+
+/// How a run presents itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunMode {
+    /// Status line on stderr, summary at the end.
+    Interactive,
+    /// No status line (benchmarks, tests).
+    Quiet,
+}
+
+/// Runs the live pipeline until Ctrl-C, the configured duration, or a failure.
+pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<StatsReport> {
+    let ctx = LiveContext::new();
+    let (writer, reader) = ctx.ring();
+    let mut replay_handle = None;
+    let mut capture_handle = None;
+    let what = match &audio {
+        AudioSource::File(path) => {
+            let a = ReplayAudio::from_file(path)?;
+            let name = a.name.clone();
+            replay_handle = Some(replay::spawn(
+                a,
+                replay_settings(config, config.audio.looped),
+                writer,
+                &ctx,
+            )?);
+            name
+        }
+        AudioSource::Demo => {
+            let a = ReplayAudio::demo(32.0 * 60.0 / crate::demo_track::DEMO_BPM * 4.0);
+            let name = a.name.clone();
+            replay_handle = Some(replay::spawn(
+                a,
+                replay_settings(config, true),
+                writer,
+                &ctx,
+            )?);
+            name
+        }
+        AudioSource::Capture(device) => {
+            let (h, desc) = capture::spawn(
+                CaptureSettings {
+                    device: device.clone(),
+                },
+                writer,
+                &ctx,
+            )
+            .context("opening the audio input")?;
+            capture_handle = Some(h);
+            desc
+        }
+    };
+    let source = crate::dancer::default_source(config.dancer.seed)?;
+    let poses = match &config.control.poses {
+        Some(p) => crate::pose_bank::PoseBank::load(p)?,
+        None => crate::pose_bank::PoseBank::shipped()?,
+    };
+    let sink = OscSink::from_config(config)?;
+    let targets = sink.describe();
+    // Bounded: a flood of control packets must not grow memory; extra events are dropped.
+    let (control_tx, control_rx) = crossbeam_channel::bounded::<ControlEvent>(1024);
+    let controls = ControlInputs::start(config, control_tx, ctx.stop.clone())?;
+    let settings = PipelineSettings {
+        rate_hz: config.output.rate_hz,
+        speed: if matches!(audio, AudioSource::Capture(_)) {
+            1.0
+        } else {
+            config.audio.speed
+        },
+        margin_ms: config.output.margin_ms,
+        temperature: config.dancer.temperature,
+        transition_beats: config.dancer.transition_beats,
+        ..PipelineSettings::default()
+    };
+    let pipeline = Pipeline::start(
+        &ctx,
+        settings,
+        PipelineParts {
+            source,
+            sink: Box::new(sink),
+            controls: control_rx,
+            poses: Box::new(poses),
+        },
+        reader,
+    )?;
+    let stop = ctx.stop.clone();
+    if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed)) {
+        tracing::warn!("Ctrl-C handler not installed: {e}");
+    }
+    if mode == RunMode::Interactive {
+        eprintln!(
+            "dancing to {what}; {} Hz out to {targets}; declared look-ahead {:.0} ms; Ctrl-C stops",
+            settings.rate_hz,
+            pipeline.declared_lookahead_s() * 1000.0
+        );
+        if let Some(a) = controls.osc_addr {
+            eprintln!("OSC control on {a} (/danced/control/...)");
+        }
+        if let Some(p) = &controls.midi_port {
+            eprintln!("MIDI control from {p}");
+        }
+    }
+    let started = Instant::now();
+    // Capture has no audio clock of its own to end on: --duration is wall time there.
+    let wall_limit = match audio {
+        AudioSource::Capture(_) => config.audio.duration.map(Duration::from_secs_f64),
+        _ => None,
+    };
+    let mut status = StatusPrinter::new();
+    // Memory is sampled from 1 s on (after start-up) while the input still runs: a finished
+    // replay frees its audio, which would fake a shrinking process.
+    let mut next_rss = Duration::from_secs(1);
+    while !ctx.stopped() && !pipeline.failed() {
+        std::thread::sleep(status.interval());
+        let elapsed = started.elapsed();
+        if elapsed >= next_rss && !ctx.stopped() {
+            ctx.stats.sample_rss(elapsed.as_secs_f64());
+            next_rss += Duration::from_secs(1);
+        }
+        if mode == RunMode::Interactive {
+            status.tick(&ctx.stats);
+        }
+        if wall_limit.is_some_and(|l| elapsed >= l) {
+            ctx.stop.store(true, Ordering::Relaxed);
+        }
+    }
+    status.finish();
+    let (mut report, _sink) = pipeline.stop()?;
+    let counters = controls.counters.clone();
+    controls.join();
+    report.osc_control_accepted = counters.osc_accepted.load(Ordering::Relaxed);
+    report.osc_control_ignored = counters.osc_ignored.load(Ordering::Relaxed);
+    report.midi_events = counters.midi_events.load(Ordering::Relaxed);
+    report.midi_bytes_dropped = counters.midi_dropped.load(Ordering::Relaxed);
+    for h in [replay_handle, capture_handle].into_iter().flatten() {
+        if h.join().is_err() {
+            bail!("the audio input thread panicked");
+        }
+    }
+    if let Some(path) = &config.stats_json {
+        let json = serde_json::to_string_pretty(&report).context("encoding the stats")?;
+        crate::output::write_atomic(path, json.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(report)
+}
+
+fn replay_settings(config: &Config, looped: bool) -> ReplaySettings {
+    ReplaySettings {
+        speed: config.audio.speed,
+        looped,
+        duration_s: config.audio.duration,
+    }
+}
+
+/// The end-of-run summary, one fact per line.
+pub fn summary(r: &StatsReport) -> String {
+    let mb = |b: u64| b as f64 / 1_048_576.0;
+    format!(
+        "ran         {:.1} s, {} frames sent ({:.1} Hz), {} model frames, {} late\n\
+         latency     p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (added, beyond the declared look-ahead)\n\
+         processing  p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (audio in → pose ready)\n\
+         jitter      p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms\n\
+         cpu         {:.1} % of one core\n\
+         memory      RSS start {:.1} MiB, end {:.1} MiB, max {:.1} MiB (first minute max {:.1}, last minute max {:.1})\n\
+         audio       {} frames dropped, {} stream errors, {} reconnects, {} frames of silence inserted\n\
+         callback    {} allocations{}\n\
+         packets     {} sent, {} events dropped; controls {} applied, {} rejected\n\
+         control in  OSC {} accepted, {} ignored; MIDI {} events, {} bytes dropped",
+        r.wall_s,
+        r.frames_sent,
+        r.frames_sent as f64 / r.wall_s.max(1e-9),
+        r.model_frames,
+        r.late_frames,
+        r.latency_ms_p50,
+        r.latency_ms_p99,
+        r.latency_ms_max,
+        r.processing_ms_p50,
+        r.processing_ms_p99,
+        r.processing_ms_max,
+        r.jitter_ms_p50,
+        r.jitter_ms_p99,
+        r.jitter_ms_max,
+        r.cpu_percent,
+        mb(r.rss_start),
+        mb(r.rss_end),
+        mb(r.rss_max),
+        mb(r.rss_first_minute_max),
+        mb(r.rss_last_minute_max),
+        r.drops,
+        r.stream_errors,
+        r.reconnects,
+        r.silence_frames,
+        r.callback_allocations,
+        if r.allocation_counting {
+            ""
+        } else {
+            " (not counted: no counting allocator)"
+        },
+        r.packets_sent,
+        r.events_dropped,
+        r.controls_accepted,
+        r.controls_rejected,
+        r.osc_control_accepted,
+        r.osc_control_ignored,
+        r.midi_events,
+        r.midi_bytes_dropped,
+    )
+}

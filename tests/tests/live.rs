@@ -1,0 +1,340 @@
+//! The live pipeline end to end, in process: a synthesised 120 BPM click track replayed
+//! through the ring, analysis, a test dancer and the paced sender into a channel.
+
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use crossbeam_channel::{Receiver, unbounded};
+use daemon::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
+use daemon::live::replay::{self, ReplayAudio, ReplaySettings};
+use daemon::live::sink::{ChannelSink, MemoryPoseBank, SinkItem};
+use daemon::live::stats::StatsReport;
+use daemon::live::wire::{AnalysisEvent, BodyFrame, ControlEvent, Quantize};
+use dsp::feature::FEATURE_DIM;
+use glam::Quat;
+use model::rig::{JOINT_COUNT, Joint, Pose};
+use model::source::{Controls, MotionSource};
+
+#[global_allocator]
+static ALLOCATOR: daemon::alloc_counter::CountingAllocator =
+    daemon::alloc_counter::CountingAllocator;
+
+const RATE: u32 = 44_100;
+const BPM: f64 = 120.0;
+const FIRST_CLICK_S: f64 = 0.25;
+const FPS: f64 = 25.0;
+
+/// Stereo clicks (short decaying noise bursts with a low thump) every beat.
+fn click_track(seconds: f64) -> ReplayAudio {
+    let n = (seconds * f64::from(RATE)) as usize;
+    let mut samples = vec![0.0f32; n * 2];
+    let period = 60.0 / BPM;
+    let mut seed = 12345u64;
+    let mut t = FIRST_CLICK_S;
+    while t < seconds {
+        let start = (t * f64::from(RATE)) as usize;
+        for i in 0..(0.05 * f64::from(RATE)) as usize {
+            let Some(frame) = samples.get_mut((start + i) * 2..(start + i) * 2 + 2) else {
+                break;
+            };
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let noise = ((seed >> 33) as f64 / (1u64 << 31) as f64) - 1.0;
+            let x = i as f64 / f64::from(RATE);
+            let v = (0.6 * noise * (-x * 120.0).exp()
+                + 0.8 * (std::f64::consts::TAU * 80.0 * x).sin() * (-x * 30.0).exp())
+                as f32;
+            frame[0] = v;
+            frame[1] = v;
+        }
+        t += period;
+    }
+    ReplayAudio {
+        samples,
+        sample_rate: RATE,
+        channels: 2,
+        name: "click track".into(),
+    }
+}
+
+/// What the test dancer saw on each step.
+#[derive(Clone, Copy, Debug)]
+struct Seen {
+    step: u64,
+    frames_to_go: Option<u32>,
+}
+
+/// Echoes the temperature into the hips' yaw (radians) and records key-pose countdowns.
+struct EchoSource {
+    steps: u64,
+    seen: Arc<Mutex<Vec<Seen>>>,
+}
+
+impl MotionSource for EchoSource {
+    fn frame_rate(&self) -> f64 {
+        FPS
+    }
+    fn lookahead_frames(&self) -> usize {
+        2
+    }
+    fn step(&mut self, music: &[[f32; FEATURE_DIM]], controls: &Controls, out: &mut Pose) {
+        assert_eq!(music.len(), 3);
+        *out = Pose::rest();
+        out.set_rotation(Joint::Hips, Quat::from_rotation_y(controls.temperature));
+        if let Ok(mut s) = self.seen.lock() {
+            s.push(Seen {
+                step: self.steps,
+                frames_to_go: controls.key_pose.map(|k| k.frames_to_go),
+            });
+        }
+        self.steps += 1;
+    }
+    fn reset(&mut self, _seed: u64) {}
+}
+
+struct Run {
+    report: StatsReport,
+    frames: Vec<(BodyFrame, std::time::Instant)>,
+    events: Vec<AnalysisEvent>,
+    seen: Vec<Seen>,
+}
+
+/// Replays `seconds` of clicks at `speed`; `controls` are sent at the given wall offsets.
+fn run(seconds: f64, speed: f64, controls: Vec<(f64, ControlEvent)>) -> Run {
+    run_until(seconds, speed, controls, None)
+}
+
+/// As [`run`], but the audio ends after `seconds` while the run goes on until `wall_stop_s`.
+fn run_until(
+    seconds: f64,
+    speed: f64,
+    controls: Vec<(f64, ControlEvent)>,
+    wall_stop_s: Option<f64>,
+) -> Run {
+    let ctx = LiveContext::new();
+    let (writer, reader) = ctx.ring();
+    let (tx, rx): (_, Receiver<SinkItem>) = unbounded();
+    let (ctx_tx, ctx_rx) = unbounded();
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let mut bank = MemoryPoseBank::new();
+    bank.insert("up", [Quat::from_rotation_x(0.3); JOINT_COUNT]);
+    let pipeline = Pipeline::start(
+        &ctx,
+        PipelineSettings {
+            speed,
+            temperature: 0.1,
+            ..PipelineSettings::default()
+        },
+        PipelineParts {
+            source: Box::new(EchoSource {
+                steps: 0,
+                seen: seen.clone(),
+            }),
+            sink: Box::new(ChannelSink::new(tx)),
+            controls: ctx_rx,
+            poses: Box::new(bank),
+        },
+        reader,
+    )
+    .unwrap();
+    let replay = replay::spawn(
+        click_track(if wall_stop_s.is_some() {
+            seconds
+        } else {
+            seconds + 1.0
+        }),
+        ReplaySettings {
+            speed,
+            looped: false,
+            duration_s: wall_stop_s.is_none().then_some(seconds),
+        },
+        writer,
+        &ctx,
+    )
+    .unwrap();
+    let started = std::time::Instant::now();
+    let mut pending = controls;
+    while !ctx.stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(5));
+        let t = started.elapsed().as_secs_f64();
+        pending.retain(|(at, c)| {
+            if *at <= t {
+                ctx_tx.send(c.clone()).unwrap();
+                false
+            } else {
+                true
+            }
+        });
+        if wall_stop_s.is_some_and(|w| t >= w) {
+            ctx.stop.store(true, Ordering::Relaxed);
+        }
+        assert!(t < 30.0, "the replay never ended");
+    }
+    let (report, _) = pipeline.stop().unwrap();
+    replay.join().unwrap();
+    let mut frames = Vec::new();
+    let mut events = Vec::new();
+    for item in rx.try_iter() {
+        match item {
+            SinkItem::Frame(f, at) => frames.push((f, at)),
+            SinkItem::Event(e) => events.push(e),
+        }
+    }
+    let seen = seen.lock().unwrap().clone();
+    Run {
+        report,
+        frames,
+        events,
+        seen,
+    }
+}
+
+fn hips_yaw(f: &BodyFrame) -> f32 {
+    let hips = &f.bones[Joint::Hips.index()];
+    assert_eq!(hips.bone, "Hips");
+    // Unity mirrors x, so a yaw of a in our frame is −a there.
+    let (axis, angle) = hips.local_rotation.to_axis_angle();
+    angle * axis.y.signum()
+}
+
+#[test]
+fn fast_replay_frames_beats_and_controls() {
+    let speed = 4.0;
+    let seconds = 16.0;
+    let r = run(
+        seconds,
+        speed,
+        vec![
+            (1.5, ControlEvent::Temperature(0.8)),
+            (
+                2.0,
+                ControlEvent::KeyPose {
+                    name: "up".into(),
+                    quantize: Quantize::NextBeat,
+                },
+            ),
+            (
+                2.2,
+                ControlEvent::KeyPose {
+                    name: "nope".into(),
+                    quantize: Quantize::Now,
+                },
+            ),
+        ],
+    );
+    // Frames at ~60 Hz of wall time, strictly increasing audio times and timetags.
+    let wall = r.report.wall_s;
+    let rate = r.frames.len() as f64 / wall;
+    assert!((50.0..=62.0).contains(&rate), "{rate} Hz over {wall} s");
+    for w in r.frames.windows(2) {
+        assert!(w[1].0.audio_time_s > w[0].0.audio_time_s);
+        assert!(w[1].0.timetag > w[0].0.timetag);
+        assert_eq!(w[1].0.frame_index, w[0].0.frame_index + 1);
+    }
+    assert_eq!(r.frames[0].0.bones.len(), JOINT_COUNT);
+
+    // Beats near the clicks once locked (after 4 s of audio).
+    let beats: Vec<f64> = r
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            AnalysisEvent::Beat { time_s, .. } => Some(*time_s),
+            _ => None,
+        })
+        .filter(|t| *t > 4.0)
+        .collect();
+    assert!(beats.len() >= 12, "only {} beats after 4 s", beats.len());
+    for b in &beats {
+        let k = ((b - FIRST_CLICK_S) * BPM / 60.0).round();
+        let click = FIRST_CLICK_S + k * 60.0 / BPM;
+        assert!(
+            (b - click).abs() < 0.07,
+            "beat at {b:.3} s, click at {click:.3} s"
+        );
+    }
+    assert!(
+        r.events
+            .iter()
+            .any(|e| matches!(e, AnalysisEvent::Tempo { .. }))
+    );
+
+    // The temperature reached the dancer: the hips' yaw echoes it in the last frames.
+    let last = &r.frames[r.frames.len() - 1].0;
+    assert!(
+        (hips_yaw(last).abs() - 0.8).abs() < 1e-3,
+        "{}",
+        hips_yaw(last)
+    );
+    let first = &r.frames[0].0;
+    assert!((hips_yaw(first).abs() - 0.1).abs() < 1e-3);
+
+    // The key pose counted down by one per frame to 0, on a click.
+    let countdown: Vec<Seen> = r
+        .seen
+        .iter()
+        .filter(|s| s.frames_to_go.is_some())
+        .copied()
+        .collect();
+    assert!(!countdown.is_empty(), "no key pose reached the dancer");
+    for w in countdown.windows(2) {
+        assert_eq!(w[1].frames_to_go.unwrap() + 1, w[0].frames_to_go.unwrap());
+        assert_eq!(w[1].step, w[0].step + 1);
+    }
+    let hit = countdown.last().unwrap();
+    assert_eq!(hit.frames_to_go, Some(0));
+    let t = hit.step as f64 / FPS;
+    let k = ((t - FIRST_CLICK_S) * BPM / 60.0).round();
+    let click = FIRST_CLICK_S + k * 60.0 / BPM;
+    assert!(
+        (t - click).abs() < 0.07,
+        "key pose at {t:.3} s, click at {click:.3} s"
+    );
+    assert_eq!(r.report.controls_accepted, 2);
+    assert_eq!(r.report.controls_rejected, 1);
+}
+
+#[test]
+fn real_time_run_has_no_drops_and_no_callback_allocations() {
+    let r = run(3.0, 1.0, Vec::new());
+    assert_eq!(r.report.drops, 0);
+    assert_eq!(r.report.callback_allocations, 0);
+    assert!(r.report.allocation_counting || !daemon::alloc_counter::is_installed());
+    assert!(
+        r.report.frames_sent > 120,
+        "{} frames",
+        r.report.frames_sent
+    );
+    assert!(r.report.jitter_ms_p99 < 5.0, "{}", r.report.jitter_ms_p99);
+}
+
+#[test]
+fn bad_config_names_the_key() {
+    use daemon::live::config::Config;
+    let e = Config::parse("[audio]\nspeeed = 2.0\n", std::path::Path::new("bad.toml")).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("speeed") && msg.contains("bad.toml"), "{msg}");
+}
+
+#[test]
+fn keeps_dancing_when_the_audio_stops() {
+    // 1 s of clicks at 4× (0.25 s of wall time), then nothing for 1.75 s.
+    let r = run_until(1.0, 4.0, Vec::new(), Some(2.0));
+    assert!(r.report.silence_frames > 0);
+    let last = r.frames.last().unwrap().1;
+    let first = r.frames[0].1;
+    // Frames keep flowing at the full rate to the very end.
+    let span = (last - first).as_secs_f64();
+    assert!(span > 1.7, "frames stopped after {span:.2} s");
+    let late_rate = r
+        .frames
+        .iter()
+        .filter(|(_, at)| (*at - first).as_secs_f64() > 1.0)
+        .count() as f64
+        / (span - 1.0);
+    assert!(late_rate > 50.0, "{late_rate} Hz without audio");
+    assert!(
+        r.seen.len() as f64 > 1.5 * FPS,
+        "{} model frames",
+        r.seen.len()
+    );
+}
