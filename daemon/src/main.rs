@@ -266,6 +266,18 @@ struct RunArgs {
     /// Frames sent per second.
     #[arg(long)]
     rate: Option<f64>,
+    /// Initial temperature (0 = the most likely motion).
+    #[arg(long)]
+    temperature: Option<f32>,
+    /// Random seed of the dancer.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Key-pose bank (TOML; default: the built-in configs/poses/bank.toml).
+    #[arg(long)]
+    poses: Option<PathBuf>,
+    /// MIDI map (TOML; default: the built-in configs/midi/generic.toml).
+    #[arg(long)]
+    midi_map: Option<PathBuf>,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -468,6 +480,18 @@ fn run(args: RunArgs) -> Result<()> {
     }
     if let Some(r) = args.rate {
         config.output.rate_hz = r;
+    }
+    if let Some(t) = args.temperature {
+        config.dancer.temperature = t;
+    }
+    if let Some(s) = args.seed {
+        config.dancer.seed = s;
+    }
+    if args.poses.is_some() {
+        config.control.poses = args.poses;
+    }
+    if args.midi_map.is_some() {
+        config.control.midi_map = args.midi_map;
     }
     config.validate("command line")?;
     let audio = match (&config.audio.input, &config.audio.device) {

@@ -1,50 +1,7 @@
 //! The `danced` binary as a user runs it.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn danced() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_danced"))
-}
-
-/// `../shared/data` beside the repository, or `None` (with a message) when `needed` is absent.
-fn shared_data(needed: &str) -> Option<PathBuf> {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    if data.join(needed).is_dir() {
-        Some(data)
-    } else {
-        eprintln!("skipping: {} not found", data.join(needed).display());
-        None
-    }
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("danced-cli-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// 16-bit PCM WAV writer, enough for tests.
-fn write_wav(path: &Path, samples: &[f32], rate: u32, channels: u16) {
-    let data_len = (samples.len() * 2) as u32;
-    let mut b = Vec::with_capacity(44 + data_len as usize);
-    b.extend_from_slice(b"RIFF");
-    b.extend_from_slice(&(36 + data_len).to_le_bytes());
-    b.extend_from_slice(b"WAVEfmt ");
-    b.extend_from_slice(&16u32.to_le_bytes());
-    b.extend_from_slice(&1u16.to_le_bytes());
-    b.extend_from_slice(&channels.to_le_bytes());
-    b.extend_from_slice(&rate.to_le_bytes());
-    b.extend_from_slice(&(rate * channels as u32 * 2).to_le_bytes());
-    b.extend_from_slice(&(channels * 2).to_le_bytes());
-    b.extend_from_slice(&16u16.to_le_bytes());
-    b.extend_from_slice(b"data");
-    b.extend_from_slice(&data_len.to_le_bytes());
-    for s in samples {
-        b.extend_from_slice(&((s.clamp(-1.0, 1.0) * 32767.0) as i16).to_le_bytes());
-    }
-    std::fs::write(path, b).unwrap();
-}
+mod common;
+use common::{danced, scratch, shared_data, write_wav};
 
 #[test]
 fn analyze_writes_beats_onsets_features_and_plot() {
