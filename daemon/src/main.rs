@@ -428,6 +428,8 @@ fn main() -> Result<()> {
             config.audio.looped = true;
             config.output.rate_hz = rate;
             config.stats_json = stats_json;
+            // A benchmark takes no control and must not hold the performer's control port.
+            config.control.osc_port = 0;
             config.validate("command line")?;
             let audio = input.map_or(AudioSource::Demo, AudioSource::File);
             eprintln!("running the live pipeline at 1× for {seconds} s...");
