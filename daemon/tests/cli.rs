@@ -200,7 +200,15 @@ fn live_run_on_a_file_writes_stats_and_a_bad_config_names_the_key() {
     let out = danced()
         .args(["run", "--input"])
         .arg(&wav)
-        .args(["--speed", "4", "--duration", "2.5", "--control-port", "0", "--stats-json"])
+        .args([
+            "--speed",
+            "4",
+            "--duration",
+            "2.5",
+            "--control-port",
+            "0",
+            "--stats-json",
+        ])
         .arg(&stats)
         .output()
         .unwrap();

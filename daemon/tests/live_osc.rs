@@ -451,3 +451,55 @@ fn oscdump_receives_the_native_and_vmc_streams() {
             .any(|l| l.contains(" /VMC/Ext/Bone/Pos sfffffff \"LeftUpperArm\" "))
     );
 }
+
+#[test]
+fn beats_of_a_recorded_song_arrive_near_the_reference_beats() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    let (song, reference) = (
+        data.join("tang2018/DANCE_C_2/audio.mp3"),
+        data.join("tang2018-beats/DANCE_C_2.beats"),
+    );
+    if !song.is_file() || !reference.is_file() {
+        eprintln!("skipping: {} not found", song.display());
+        return;
+    }
+    let reference = daemon::output::read_times(&reference).unwrap();
+    let native = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let port = native.local_addr().unwrap().port();
+    let child = danced()
+        .args(["run", "--input"])
+        .arg(&song)
+        .args(["--speed", "4", "--duration", "30", "--control-port", "0"])
+        .args(["--osc", &format!("127.0.0.1:{port}")])
+        .args(["--vmc", &format!("127.0.0.1:{}", free_port())])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let rx = receive(native, Instant::now() + Duration::from_secs(10));
+    let out = wait(child, Duration::from_secs(40));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (_, events) = native_frames(&rx.join().unwrap());
+    let beats: Vec<f64> = events
+        .iter()
+        .filter(|m| m.addr == "/danced/beat")
+        .map(|m| floats(m)[1] as f64)
+        .filter(|t| *t > 5.0)
+        .collect();
+    let near = beats
+        .iter()
+        .filter(|b| reference.iter().any(|r| (r - *b).abs() < 0.07))
+        .count();
+    let share = near as f64 / beats.len().max(1) as f64;
+    eprintln!(
+        "{} of {} beats within 70 ms of the reference",
+        near,
+        beats.len()
+    );
+    assert!(beats.len() > 20, "{} beats", beats.len());
+    assert!(share > 0.8, "{share:.2} of the beats near the reference");
+}
