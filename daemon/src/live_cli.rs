@@ -98,6 +98,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         margin_ms: config.output.margin_ms,
         temperature: config.dancer.temperature,
         transition_beats: config.dancer.transition_beats,
+        realtime: config.output.realtime,
         ..PipelineSettings::default()
     };
     let pipeline = Pipeline::start(
@@ -189,7 +190,7 @@ pub fn summary(r: &StatsReport) -> String {
          latency     p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (added, beyond the declared look-ahead)\n\
          processing  p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (audio in → pose ready)\n\
          jitter      p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms\n\
-         cpu         {:.1} % of one core\n\
+         cpu         {:.1} % of one core, {} threads at real-time priority\n\
          memory      RSS start {:.1} MiB, end {:.1} MiB, max {:.1} MiB (first minute max {:.1}, last minute max {:.1})\n\
          audio       {} frames dropped, {} stream errors, {} reconnects, {} frames of silence inserted\n\
          callback    {} allocations{}\n\
@@ -210,6 +211,7 @@ pub fn summary(r: &StatsReport) -> String {
         r.jitter_ms_p99,
         r.jitter_ms_max,
         r.cpu_percent,
+        r.realtime_threads,
         mb(r.rss_start),
         mb(r.rss_end),
         mb(r.rss_max),

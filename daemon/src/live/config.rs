@@ -92,6 +92,8 @@ pub struct OutputConfig {
     pub rate_hz: f64,
     /// Safety margin before a pose is shown, beyond the declared look-ahead, ms.
     pub margin_ms: f64,
+    /// Run the pipeline threads at real-time priority where the system allows it.
+    pub realtime: bool,
     /// Plain OSC targets (host:port).
     pub osc: Vec<String>,
     /// VMC protocol output.
@@ -105,6 +107,7 @@ impl Default for OutputConfig {
         Self {
             rate_hz: 60.0,
             margin_ms: 8.0,
+            realtime: true,
             osc: vec!["127.0.0.1:10000".into()],
             vmc: VmcConfig::default(),
             vrchat: VrchatConfig::default(),

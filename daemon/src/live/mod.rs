@@ -8,6 +8,7 @@ pub mod devices;
 pub mod io;
 pub mod motion;
 pub mod pipeline;
+pub mod priority;
 pub mod replay;
 pub mod ring;
 pub mod scheduler;

@@ -39,10 +39,12 @@ pub struct PipelineSettings {
     pub transition_beats: f32,
     /// Wall time without audio after which silence is analysed instead, seconds.
     pub silence_after_s: f64,
+    /// Run the threads at real-time priority where the system allows it.
+    pub realtime: bool,
 }
 
 impl Default for PipelineSettings {
-    /// 60 Hz, real time, 8 ms margin, temperature 0.5, one-beat transitions.
+    /// 60 Hz, real time, 8 ms margin, temperature 0.5, one-beat transitions, real-time threads.
     fn default() -> Self {
         Self {
             rate_hz: 60.0,
@@ -51,6 +53,7 @@ impl Default for PipelineSettings {
             temperature: 0.5,
             transition_beats: 1.0,
             silence_after_s: 0.25,
+            realtime: true,
         }
     }
 }
@@ -154,6 +157,12 @@ impl Pipeline {
         let (ftx, frx) = crossbeam_channel::bounded(1024);
         let (etx, erx) = crossbeam_channel::bounded(4096);
         let spawn_err = |what: &str| format!("starting the {what} thread");
+        let realtime = settings.realtime;
+        let promote = move |priority: i32, stats: &Stats| {
+            if realtime && super::priority::promote_current_thread(priority) {
+                stats.realtime_threads.fetch_add(1, Ordering::Relaxed);
+            }
+        };
         let analysis = {
             let (tl, stats, stop, epoch) = (
                 timeline.clone(),
@@ -167,7 +176,10 @@ impl Pipeline {
             };
             std::thread::Builder::new()
                 .name("danced-analysis".into())
-                .spawn(move || analysis::run(reader, s, epoch, tl, stats, stop, ftx, etx))
+                .spawn(move || {
+                    promote(super::priority::ANALYSIS_PRIORITY, &stats);
+                    analysis::run(reader, s, epoch, tl, stats, stop, ftx, etx)
+                })
                 .with_context(|| spawn_err("analysis"))?
         };
         let motion = {
@@ -189,7 +201,10 @@ impl Pipeline {
             } = parts;
             std::thread::Builder::new()
                 .name("danced-motion".into())
-                .spawn(move || motion::run(source, poses, s, epoch, tl, stats, stop, frx, controls))
+                .spawn(move || {
+                    promote(super::priority::MOTION_PRIORITY, &stats);
+                    motion::run(source, poses, s, epoch, tl, stats, stop, frx, controls)
+                })
                 .with_context(|| spawn_err("motion"))?
         };
         let sender = {
@@ -204,7 +219,10 @@ impl Pipeline {
             let sink = parts.sink;
             std::thread::Builder::new()
                 .name("danced-send".into())
-                .spawn(move || scheduler::run(sink, s, epoch, tl, stats, stop, erx))
+                .spawn(move || {
+                    promote(super::priority::SENDER_PRIORITY, &stats);
+                    scheduler::run(sink, s, epoch, tl, stats, stop, erx)
+                })
                 .with_context(|| spawn_err("sender"))?
         };
         Ok(Self {

@@ -144,6 +144,8 @@ pub struct Stats {
     pub controls_accepted: AtomicU64,
     /// Control events refused (unknown pose name, invalid value).
     pub controls_rejected: AtomicU64,
+    /// Pipeline threads running at real-time priority.
+    pub realtime_threads: AtomicU64,
     /// Current tempo, BPM.
     pub tempo_bpm: AtomicF32,
     /// Current beat phase in [0, 1).
@@ -183,6 +185,7 @@ impl Stats {
             events_dropped: AtomicU64::new(0),
             controls_accepted: AtomicU64::new(0),
             controls_rejected: AtomicU64::new(0),
+            realtime_threads: AtomicU64::new(0),
             tempo_bpm: AtomicF32::default(),
             beat_phase: AtomicF32::default(),
             temperature: AtomicF32::default(),
@@ -259,6 +262,7 @@ impl Stats {
             allocation_counting: crate::alloc_counter::is_installed(),
             controls_accepted: load(&self.controls_accepted),
             controls_rejected: load(&self.controls_rejected),
+            realtime_threads: load(&self.realtime_threads),
             osc_control_accepted: 0,
             osc_control_ignored: 0,
             midi_events: 0,
@@ -328,6 +332,8 @@ pub struct StatsReport {
     pub controls_accepted: u64,
     /// Control events refused.
     pub controls_rejected: u64,
+    /// Pipeline threads that got real-time priority (3 when the system allows it, else 0).
+    pub realtime_threads: u64,
     /// OSC control events parsed from the control port.
     pub osc_control_accepted: u64,
     /// OSC control packets or messages ignored (malformed, unknown address, wrong arguments).
