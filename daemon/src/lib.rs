@@ -8,6 +8,7 @@ pub mod dataset;
 pub mod decode;
 pub mod demo_track;
 pub mod eval;
+pub mod neural;
 pub mod offline;
 pub mod output;
 pub mod plot;
