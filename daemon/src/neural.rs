@@ -194,6 +194,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let started = Instant::now();
     let mut step: u64 = 0;
     let mut smoothed = f64::NAN;
+    let mut bad_steps = 0;
     let mut last_val = if val.is_empty() {
         None
     } else {
@@ -215,11 +216,16 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         let lr = learning_rate(args.lr, step, progress);
         let batch = corpus.random_batch(&mut rng, args.batch, args.key_drop);
         let loss = trainer.step(&batch, lr) as f64;
-        if !loss.is_finite() {
+        bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
+        if bad_steps >= 20 {
             bail!(
-                "training diverged at step {step} (loss {loss}); the last checkpoint is {}",
+                "training diverged at step {step} (20 non-finite losses in a row); the last checkpoint is {}",
                 args.out.display()
             );
+        }
+        if !loss.is_finite() {
+            step += 1;
+            continue;
         }
         smoothed = if smoothed.is_nan() {
             loss
@@ -235,11 +241,17 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 Some(trainer.evaluate(&val)?)
             };
             checkpoint(&mut trainer, step, last_val, secs)?;
-            pb.println(format!(
+            // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
+            let line = format!(
                 "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame",
                 step / steps_per_epoch,
                 last_val.map_or("-".into(), |v| format!("{v:.2}"))
-            ));
+            );
+            if pb.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                pb.println(line);
+            }
         }
         pb.set_position(secs as u64);
         pb.set_message(format!(

@@ -250,7 +250,9 @@ impl Flow {
                     .mean_dim(0),
             );
             let bias: Vec<f32> = mean.iter().map(|m| -m).collect();
-            let logs: Vec<f32> = var.iter().map(|v| -0.5 * (v + 1e-6).ln()).collect();
+            // Floored: a (nearly) constant dimension must not get an enormous scale, which
+            // would make its density degenerate and the loss explode on unseen data.
+            let logs: Vec<f32> = var.iter().map(|v| -0.5 * v.max(1e-2).ln()).collect();
             if bias.len() == d && logs.len() == d {
                 s.an_bias =
                     Param::from_tensor(Tensor::from_data(TensorData::new(bias, [d]), &device));

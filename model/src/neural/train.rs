@@ -21,6 +21,11 @@ pub const KEY_HORIZON_MIN: usize = 12;
 /// Longest key-pose horizon drawn in training, frames (4 s).
 pub const KEY_HORIZON_MAX: usize = 100;
 
+/// Standard deviation of the Gaussian noise added to training targets (normalised units):
+/// some features are (nearly) constant in the data, and a flow fitted to a degenerate
+/// dimension drives its density to infinity; the noise bounds it (validation is noise-free).
+pub const TARGET_NOISE: f32 = 0.03;
+
 /// One normalised dance.
 #[derive(Clone, Debug)]
 struct Dance {
@@ -98,6 +103,7 @@ impl Corpus {
         dance: usize,
         start: usize,
         key: Option<(usize, usize)>,
+        mut noise: Option<&mut Rng>,
     ) {
         let d = &self.dances[dance];
         let (s, l) = (self.config.window, self.config.lookahead);
@@ -119,6 +125,12 @@ impl Corpus {
             batch
                 .targets
                 .extend_from_slice(&d.motion[f * P..(f + 1) * P]);
+            if let Some(rng) = noise.as_mut() {
+                let n = batch.targets.len();
+                for v in &mut batch.targets[n - P..] {
+                    *v += TARGET_NOISE * rng.normal();
+                }
+            }
         }
         batch.sequences += 1;
     }
@@ -143,7 +155,7 @@ impl Corpus {
                 let horizon = KEY_HORIZON_MIN + rng.below(KEY_HORIZON_MAX - KEY_HORIZON_MIN + 1);
                 (at, (start + at + horizon).min(n - 1))
             });
-            self.push_sequence(&mut batch, dance, start, key);
+            self.push_sequence(&mut batch, dance, start, key, Some(rng));
         }
         batch
     }
@@ -156,7 +168,7 @@ impl Corpus {
         for (i, d) in self.dances.iter().enumerate() {
             let mut start = 1;
             while start + s + l <= d.frames {
-                self.push_sequence(&mut batch, i, start, None);
+                self.push_sequence(&mut batch, i, start, None, None);
                 if batch.sequences == 16 {
                     out.push(std::mem::take(&mut batch));
                 }
@@ -214,7 +226,8 @@ impl Trainer {
         self.net = self.net.take().map(|n| n.data_init(tok, tgt));
     }
 
-    /// One optimiser step at learning rate `lr`; returns the batch's NLL, nats per frame.
+    /// One optimiser step at learning rate `lr`; returns the batch's NLL, nats per frame (a
+    /// non-finite NLL skips the update).
     pub fn step(&mut self, batch: &Batch, lr: f64) -> f32 {
         let Some(net) = self.net.take() else {
             return f32::NAN;
@@ -222,6 +235,11 @@ impl Trainer {
         let (tok, tgt) = tensors(batch, &self.device);
         let loss = net.nll(tok, tgt).mean();
         let value = values(loss.clone()).first().copied().unwrap_or(f32::NAN);
+        if !value.is_finite() {
+            // Skip the update: one bad batch must not poison the weights.
+            self.net = Some(net);
+            return value;
+        }
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         self.net = Some(self.optim.step(lr, net, grads));
         value
