@@ -68,6 +68,9 @@ pub struct BenchModelArgs {
     /// Frames timed after warm-up.
     #[arg(long, default_value_t = 5000)]
     pub frames: usize,
+    /// Sampling temperature.
+    #[arg(long, default_value_t = 1.0)]
+    pub temperature: f32,
 }
 
 fn load_dances(data: &Path, jobs: usize) -> Result<Vec<BuiltDance>> {
@@ -280,7 +283,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
 }
 
 /// Per-frame sampling times after warm-up, sorted, microseconds.
-pub fn time_frames(dancer: &mut dyn MotionSource, frames: usize) -> Vec<f64> {
+pub fn time_frames(dancer: &mut dyn MotionSource, frames: usize, temperature: f32) -> Vec<f64> {
     let mut music = vec![[0.0f32; FEATURE_DIM]; dancer.lookahead_frames() + 1];
     let mut pose = Pose::rest();
     let mut rng = Rng::new(9);
@@ -299,7 +302,7 @@ pub fn time_frames(dancer: &mut dyn MotionSource, frames: usize) -> Vec<f64> {
         }
         // Half the time with a key pose counting down, as the daemon will drive it.
         let controls = Controls {
-            temperature: 1.0,
+            temperature,
             key_pose: ((i / 100) % 2 == 1).then_some(KeyPoseTarget {
                 frames_to_go: 99 - (i % 100) as u32,
                 ..key
@@ -330,7 +333,27 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
         }
     };
     let mut dancer = NeuralDancer::new(&model)?;
-    let times = time_frames(&mut dancer, args.frames.max(1));
+    // Where the first frame lands, to diagnose held frames.
+    dancer.reset(1);
+    let mut pose = Pose::rest();
+    let music = vec![[0.0f32; FEATURE_DIM]; dancer.lookahead_frames() + 1];
+    let controls = Controls {
+        temperature: args.temperature,
+        key_pose: None,
+    };
+    dancer.step(&music, &controls, &mut pose);
+    let (worst, value) = dancer
+        .last_sample()
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .map_or((0, 0.0), |(i, v)| (i, *v));
+    println!(
+        "first frame: largest normalised feature {} = {value:.2} ({} held)",
+        model::motion::feature_name(worst).unwrap_or_default(),
+        dancer.bad_frames()
+    );
+    let times = time_frames(&mut dancer, args.frames.max(1), args.temperature);
     let q = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
     println!(
         "model {:?}\n{} frames after 200 warm-up: p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per frame (one thread); {} held frames",

@@ -73,6 +73,11 @@ impl NeuralDancer {
         self.norm.pose(features, &mut self.seed_pose);
     }
 
+    /// The last flow sample, normalised features (for diagnostics: a held frame's culprit).
+    pub fn last_sample(&self) -> &[f32] {
+        &self.sample
+    }
+
     /// Frames since the last reset whose output was non-finite or exploding (the last good
     /// pose was held instead).
     pub fn bad_frames(&self) -> u64 {
