@@ -12,6 +12,7 @@ pub mod eval;
 pub mod key_cue;
 pub mod live;
 pub mod live_cli;
+pub mod neural;
 pub mod offline;
 pub mod output;
 pub mod plot;

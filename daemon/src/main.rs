@@ -30,6 +30,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Train the neural dancer on the tang2018 dances.
+    Train(daemon::neural::TrainArgs),
     /// Analyse an audio file with the streaming analysis (beats, onsets, tempo, features).
     Analyze(AnalyzeArgs),
     /// Measure the analysis on the annotated data sets.
@@ -223,6 +225,8 @@ enum BenchCommand {
         #[arg(long)]
         stats_json: Option<PathBuf>,
     },
+    /// Per-frame sampling time of the neural dancer on one thread (p50, p99).
+    Model(daemon::neural::BenchModelArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -355,6 +359,10 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Analyze(args) => analyze(args),
+        Command::Train(args) => daemon::neural::train(&args),
+        Command::Bench {
+            what: BenchCommand::Model(args),
+        } => daemon::neural::bench_model(&args),
         Command::Bench {
             what: BenchCommand::Beats(args),
         } => bench_beats(args),

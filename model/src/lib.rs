@@ -8,6 +8,7 @@ pub mod bvh;
 pub mod clip_file;
 pub mod metrics;
 pub mod motion;
+pub mod neural;
 pub mod retrieval;
 pub mod rig;
 pub mod rotation;

@@ -1,0 +1,368 @@
+//! `danced train` and `danced bench model`: the neural dancer's training loop (data, progress,
+//! validation, checkpoints) and its per-frame timing.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use dsp::feature::FEATURE_DIM;
+use model::motion::MOTION_FEATURE_DIM;
+use model::neural::config::NetConfig;
+use model::neural::dancer::NeuralDancer;
+use model::neural::file::{NeuralModel, TrainingSummary};
+use model::neural::rng::Rng;
+use model::neural::tensors::init_net;
+use model::neural::token::Normalizer;
+use model::neural::train::{Batch, Corpus, Trainer};
+use model::rig::Pose;
+use model::source::{Controls, KeyPoseTarget, MotionSource};
+
+use crate::dataset::BuiltDance;
+
+/// Options of `danced train`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct TrainArgs {
+    /// The shared data folder (tang2018 dances are built from it).
+    #[arg(long, default_value = "../shared/data")]
+    pub data: PathBuf,
+    /// Where the model (and its checkpoints) are written.
+    #[arg(long, default_value = "danced-model.dnn")]
+    pub out: PathBuf,
+    /// Training time budget, minutes (data loading not included).
+    #[arg(long, default_value_t = 55.0)]
+    pub minutes: f64,
+    /// Continue from this model's weights (the optimiser state starts fresh).
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    /// Seed of initialisation and batch sampling.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Sequences per batch.
+    #[arg(long, default_value_t = 16)]
+    pub batch: usize,
+    /// Peak learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Fraction of sequences trained without a key pose.
+    #[arg(long, default_value_t = 0.3)]
+    pub key_drop: f64,
+    /// Threads building the dances.
+    #[arg(long, default_value_t = 1)]
+    pub jobs: usize,
+    /// Stop after this many steps (for smoke tests and speed measurements).
+    #[arg(long)]
+    pub max_steps: Option<u64>,
+    /// Use the tiny test network instead of the default size.
+    #[arg(long, hide = true)]
+    pub tiny: bool,
+}
+
+/// Options of `danced bench model`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct BenchModelArgs {
+    /// Model file (default: an untrained network of the default size, which costs the same).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Frames timed after warm-up.
+    #[arg(long, default_value_t = 5000)]
+    pub frames: usize,
+    /// Sampling temperature.
+    #[arg(long, default_value_t = 1.0)]
+    pub temperature: f32,
+}
+
+fn load_dances(data: &Path, jobs: usize) -> Result<Vec<BuiltDance>> {
+    let dances = crate::dataset::dances_with_split(data)
+        .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
+    let pb = ProgressBar::new(dances.len() as u64);
+    pb.set_style(
+        ProgressStyle::with_template("building dances {bar:30} {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let built = crate::pool::parallel_map(&dances, jobs.max(1), |(dir, name, validation)| {
+        let r = model::tang2018::load_dance(dir)
+            .map_err(|e| e.to_string())
+            .and_then(|d| crate::dataset::build_dance(&d, data, *validation));
+        pb.set_message(name.clone());
+        pb.inc(1);
+        r
+    });
+    pb.finish_and_clear();
+    let built: Vec<BuiltDance> = built
+        .into_iter()
+        .filter_map(|r| r.ok())
+        .filter(|d| !d.music.is_empty())
+        .collect();
+    if built.is_empty() {
+        bail!("no dance with music could be built from {}", data.display());
+    }
+    Ok(built)
+}
+
+/// A dance's motion and its frame-aligned music.
+type DancePair<'a> = (&'a [[f32; MOTION_FEATURE_DIM]], &'a [[f32; FEATURE_DIM]]);
+
+fn pairs(dances: &[BuiltDance], validation: bool) -> Vec<DancePair<'_>> {
+    dances
+        .iter()
+        .filter(|d| d.validation == validation)
+        .map(|d| (&d.motion[..], &d.music[..]))
+        .collect()
+}
+
+/// Warm-up, then cosine decay to a tenth of the peak over the time budget.
+fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
+    let warm = ((step + 1) as f64 / 200.0).min(1.0);
+    let cosine = 0.5 * (1.0 + (std::f64::consts::PI * progress.clamp(0.0, 1.0)).cos());
+    peak * warm * (0.1 + 0.9 * cosine)
+}
+
+/// `danced train`.
+pub fn train(args: &TrainArgs) -> Result<()> {
+    let started_loading = Instant::now();
+    let dances = load_dances(&args.data, args.jobs)?;
+    let train_pairs = pairs(&dances, false);
+    let val_pairs = pairs(&dances, true);
+    let (mut model, fresh) = match &args.resume {
+        Some(path) => (
+            NeuralModel::load(path).with_context(|| format!("loading {}", path.display()))?,
+            false,
+        ),
+        None => {
+            let config = if args.tiny {
+                NetConfig::tiny()
+            } else {
+                NetConfig::default()
+            };
+            let mut m = NeuralModel {
+                config,
+                tensors: init_net(&config, args.seed),
+                training: TrainingSummary::default(),
+            };
+            let motion: Vec<_> = train_pairs
+                .iter()
+                .flat_map(|p| p.0.iter().copied())
+                .collect();
+            let music: Vec<_> = train_pairs
+                .iter()
+                .flat_map(|p| p.1.iter().copied())
+                .collect();
+            m.set_normalizer(&Normalizer::fit(&motion, &music));
+            // The seed pose: a real frame (the first of the first training dance's second second).
+            let seed = train_pairs[0].0.get(25).unwrap_or(&train_pairs[0].0[0]);
+            m.tensors
+                .insert("seed.pose", &[MOTION_FEATURE_DIM], seed.to_vec());
+            (m, true)
+        }
+    };
+    let config = model.config;
+    let norm = model.normalizer()?;
+    let corpus = Corpus::new(&train_pairs, &norm, &config);
+    let val_corpus = Corpus::new(&val_pairs, &norm, &config);
+    if corpus.dances() == 0 {
+        bail!(
+            "no training dance is long enough for a {}-frame sequence",
+            config.window
+        );
+    }
+    let val: Vec<Batch> = val_corpus.all_sequences().into_iter().take(32).collect();
+    eprintln!(
+        "data: {} training dances ({} frames), {} validation dances ({} frames, {} sequences scored), loaded in {:.0} s",
+        corpus.dances(),
+        corpus.frames(),
+        val_corpus.dances(),
+        val_corpus.frames(),
+        val.iter().map(|b| b.sequences).sum::<usize>(),
+        started_loading.elapsed().as_secs_f64()
+    );
+    let previous = model.training.clone();
+    model.training.dances = corpus.dances();
+    model.training.frames = corpus.frames();
+    model.training.seed = args.seed;
+    let mut trainer = Trainer::new(model)?;
+    let mut rng = Rng::new(args.seed.wrapping_add(previous.steps));
+    if fresh {
+        trainer.data_init(&corpus.random_batch(&mut rng, 64, args.key_drop));
+    }
+    let frames_per_step = args.batch * config.window;
+    let steps_per_epoch = (corpus.frames() / frames_per_step).max(1) as u64;
+    let budget = Duration::from_secs_f64(args.minutes.max(0.0) * 60.0);
+    let pb = ProgressBar::new(budget.as_secs());
+    pb.set_style(
+        ProgressStyle::with_template("{bar:30} {elapsed}/{len}s {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let started = Instant::now();
+    let mut step: u64 = 0;
+    let mut smoothed = f64::NAN;
+    let mut bad_steps = 0;
+    let mut last_val = if val.is_empty() {
+        None
+    } else {
+        Some(trainer.evaluate(&val)?)
+    };
+    eprintln!("validation NLL before training: {:?} nats/frame", last_val);
+    let checkpoint =
+        |trainer: &mut Trainer, step: u64, val: Option<f64>, elapsed: f64| -> Result<()> {
+            let m = trainer.model();
+            m.training.steps = previous.steps + step;
+            m.training.sequences = previous.sequences + step * args.batch as u64;
+            m.training.seconds = previous.seconds + elapsed;
+            m.training.validation_nll = val;
+            m.save(&args.out)
+                .with_context(|| format!("writing {}", args.out.display()))
+        };
+    while started.elapsed() < budget && args.max_steps.is_none_or(|m| step < m) {
+        let progress = started.elapsed().as_secs_f64() / budget.as_secs_f64().max(1e-9);
+        let lr = learning_rate(args.lr, step, progress);
+        let batch = corpus.random_batch(&mut rng, args.batch, args.key_drop);
+        let loss = trainer.step(&batch, lr) as f64;
+        bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
+        if bad_steps >= 20 {
+            bail!(
+                "training diverged at step {step} (20 non-finite losses in a row); the last checkpoint is {}",
+                args.out.display()
+            );
+        }
+        if !loss.is_finite() {
+            step += 1;
+            continue;
+        }
+        smoothed = if smoothed.is_nan() {
+            loss
+        } else {
+            0.98 * smoothed + 0.02 * loss
+        };
+        step += 1;
+        let secs = started.elapsed().as_secs_f64();
+        if step.is_multiple_of(steps_per_epoch) {
+            last_val = if val.is_empty() {
+                None
+            } else {
+                Some(trainer.evaluate(&val)?)
+            };
+            checkpoint(&mut trainer, step, last_val, secs)?;
+            // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
+            let line = format!(
+                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame",
+                step / steps_per_epoch,
+                last_val.map_or("-".into(), |v| format!("{v:.2}"))
+            );
+            if pb.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                pb.println(line);
+            }
+        }
+        pb.set_position(secs as u64);
+        pb.set_message(format!(
+            "step {step} loss {smoothed:.2} val {} lr {lr:.1e} {:.0} frames/s",
+            last_val.map_or("-".into(), |v| format!("{v:.2}")),
+            (step as f64 * frames_per_step as f64) / secs
+        ));
+    }
+    pb.finish_and_clear();
+    let secs = started.elapsed().as_secs_f64();
+    last_val = if val.is_empty() {
+        None
+    } else {
+        Some(trainer.evaluate(&val)?)
+    };
+    checkpoint(&mut trainer, step, last_val, secs)?;
+    println!(
+        "trained {step} steps in {secs:.0} s ({:.3} s/step, {:.0} frames/s, {:.2} epochs); validation NLL {} nats/frame; wrote {}",
+        secs / step.max(1) as f64,
+        (step as f64 * frames_per_step as f64) / secs.max(1e-9),
+        step as f64 / steps_per_epoch as f64,
+        last_val.map_or("-".into(), |v| format!("{v:.3}")),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Per-frame sampling times after warm-up, sorted, microseconds.
+pub fn time_frames(dancer: &mut dyn MotionSource, frames: usize, temperature: f32) -> Vec<f64> {
+    let mut music = vec![[0.0f32; FEATURE_DIM]; dancer.lookahead_frames() + 1];
+    let mut pose = Pose::rest();
+    let mut rng = Rng::new(9);
+    let key = KeyPoseTarget {
+        rotations: Pose::rest().local_rotations,
+        frames_to_go: 50,
+    };
+    dancer.reset(1);
+    let mut times = Vec::with_capacity(frames);
+    let warm_up = 200;
+    for i in 0..warm_up + frames {
+        for frame in music.iter_mut() {
+            for v in frame.iter_mut() {
+                *v = rng.normal();
+            }
+        }
+        // Half the time with a key pose counting down, as the daemon will drive it.
+        let controls = Controls {
+            temperature,
+            key_pose: ((i / 100) % 2 == 1).then_some(KeyPoseTarget {
+                frames_to_go: 99 - (i % 100) as u32,
+                ..key
+            }),
+        };
+        let t = Instant::now();
+        dancer.step(&music, &controls, &mut pose);
+        let dt = t.elapsed().as_secs_f64() * 1e6;
+        if i >= warm_up {
+            times.push(dt);
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    times
+}
+
+/// `danced bench model`.
+pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
+    let model = match &args.model {
+        Some(p) => NeuralModel::load(p).with_context(|| format!("loading {}", p.display()))?,
+        None => {
+            let config = NetConfig::default();
+            NeuralModel {
+                config,
+                tensors: init_net(&config, 1),
+                training: TrainingSummary::default(),
+            }
+        }
+    };
+    let mut dancer = NeuralDancer::new(&model)?;
+    // Where the first frame lands, to diagnose held frames.
+    dancer.reset(1);
+    let mut pose = Pose::rest();
+    let music = vec![[0.0f32; FEATURE_DIM]; dancer.lookahead_frames() + 1];
+    let controls = Controls {
+        temperature: args.temperature,
+        key_pose: None,
+    };
+    dancer.step(&music, &controls, &mut pose);
+    let (worst, value) = dancer
+        .last_sample()
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .map_or((0, 0.0), |(i, v)| (i, *v));
+    println!(
+        "first frame: largest normalised feature {} = {value:.2} ({} held)",
+        model::motion::feature_name(worst).unwrap_or_default(),
+        dancer.bad_frames()
+    );
+    let times = time_frames(&mut dancer, args.frames.max(1), args.temperature);
+    let q = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
+    println!(
+        "model {:?}\n{} frames after 200 warm-up: p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per frame (one thread); {} held frames",
+        model.config,
+        times.len(),
+        q(0.5) / 1e3,
+        q(0.99) / 1e3,
+        times[times.len() - 1] / 1e3,
+        dancer.bad_frames()
+    );
+    Ok(())
+}

@@ -1,0 +1,124 @@
+//! Sizes of the network; stored in the model file so a file rebuilds the exact network.
+
+use serde::{Deserialize, Serialize};
+
+use crate::motion::MOTION_FEATURE_DIM;
+use crate::neural::token::TOKEN_DIM;
+
+/// Sizes of the conditional flow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FlowConfig {
+    /// Dimension of the modelled vector.
+    pub dim: usize,
+    /// Dimension of the context vector.
+    pub context: usize,
+    /// Hidden width of each coupling's MLP.
+    pub hidden: usize,
+    /// Flow steps (actnorm, invertible linear, affine coupling).
+    pub steps: usize,
+}
+
+impl FlowConfig {
+    /// Width of the half passed through unchanged by a coupling (conditions the other half).
+    pub fn half(&self) -> usize {
+        self.dim / 2
+    }
+
+    /// Width of the half a coupling transforms.
+    pub fn rest(&self) -> usize {
+        self.dim - self.half()
+    }
+}
+
+/// Sizes of the whole network: the causal transformer and its flow head.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NetConfig {
+    /// Width of the transformer's residual stream (also the flow's context size).
+    pub d_model: usize,
+    /// Attention heads (`d_model` must divide evenly; the head size must be even for rotary positions).
+    pub heads: usize,
+    /// Transformer blocks.
+    pub layers: usize,
+    /// Hidden width of each feed-forward block.
+    pub ff: usize,
+    /// Attention window in tokens (= frames); also the training sequence length.
+    pub window: usize,
+    /// Music look-ahead in frames: token t carries the music of frame t + lookahead.
+    pub lookahead: usize,
+    /// Flow steps.
+    pub flow_steps: usize,
+    /// Hidden width of the flow's coupling MLPs.
+    pub flow_hidden: usize,
+}
+
+impl Default for NetConfig {
+    /// The shipped size: 3 × 128-wide blocks over a 2.56 s window, 0.16 s look-ahead, 8 flow steps.
+    fn default() -> Self {
+        NetConfig {
+            d_model: 128,
+            heads: 4,
+            layers: 3,
+            ff: 256,
+            window: 64,
+            lookahead: 4,
+            flow_steps: 8,
+            flow_hidden: 192,
+        }
+    }
+}
+
+impl NetConfig {
+    /// A tiny network for tests.
+    pub fn tiny() -> Self {
+        NetConfig {
+            d_model: 16,
+            heads: 2,
+            layers: 2,
+            ff: 24,
+            window: 8,
+            lookahead: 2,
+            flow_steps: 2,
+            flow_hidden: 16,
+        }
+    }
+
+    /// Size of one attention head.
+    pub fn head_dim(&self) -> usize {
+        self.d_model / self.heads
+    }
+
+    /// The flow head's sizes.
+    pub fn flow(&self) -> FlowConfig {
+        FlowConfig {
+            dim: MOTION_FEATURE_DIM,
+            context: self.d_model,
+            hidden: self.flow_hidden,
+            steps: self.flow_steps,
+        }
+    }
+
+    /// Input width of a token.
+    pub fn token_dim(&self) -> usize {
+        TOKEN_DIM
+    }
+
+    /// Why this configuration cannot build a network, if it cannot.
+    pub fn check(&self) -> Result<(), String> {
+        if self.d_model == 0 || self.heads == 0 || self.layers == 0 || self.window == 0 {
+            return Err("zero-sized network".into());
+        }
+        if !self.d_model.is_multiple_of(self.heads) || !self.head_dim().is_multiple_of(2) {
+            return Err(format!(
+                "d_model {} is not an even head size times {} heads",
+                self.d_model, self.heads
+            ));
+        }
+        if self.flow_steps == 0 || self.flow_hidden == 0 || self.ff == 0 {
+            return Err("zero-sized flow or feed-forward".into());
+        }
+        if self.window > 4096 || self.d_model > 4096 || self.ff > 16384 || self.lookahead > 250 {
+            return Err("implausibly large network".into());
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,393 @@
+//! The model file: magic, format version, JSON metadata (frame rate, look-ahead, feature
+//! layouts, rig, network sizes, training summary, tensor list), the tensors as little-endian
+//! f32, and a CRC-32 over everything before it. Loading validates all of it and returns a
+//! [`ModelFileError`], never panics; saving writes a temporary file and renames it over the
+//! target, so a crash never leaves a half-written model.
+
+use std::io::Write;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::motion::{MOTION_FEATURE_DIM, MOTION_LAYOUT_VERSION};
+use crate::neural::config::NetConfig;
+use crate::neural::tensors::{NamedTensors, Tensor, WeightError};
+use crate::neural::token::Normalizer;
+use crate::rig::JOINT_COUNT;
+use dsp::feature::{FEATURE_DIM, FEATURE_LAYOUT_VERSION};
+
+/// First bytes of every model file.
+pub const MAGIC: &[u8; 8] = b"DANCEDNN";
+/// Version of this file layout; bump on any incompatible change.
+pub const FORMAT_VERSION: u32 = 1;
+/// Frames per second every model here runs at.
+pub const FRAME_RATE: f64 = 25.0;
+
+/// What went wrong reading or writing a model file.
+#[derive(Debug, Error)]
+pub enum ModelFileError {
+    /// Reading or writing failed.
+    #[error("model file I/O: {0}")]
+    Io(#[from] std::io::Error),
+    /// The file does not start with the model magic.
+    #[error("not a danced model file (bad magic)")]
+    BadMagic,
+    /// The file ends early.
+    #[error("model file is truncated")]
+    Truncated,
+    /// The checksum does not match the content.
+    #[error("model file is corrupted (checksum mismatch)")]
+    Checksum,
+    /// A format version this build cannot read.
+    #[error("model file format version {found}, this build reads {FORMAT_VERSION}")]
+    Version {
+        /// Version in the file.
+        found: u32,
+    },
+    /// The metadata is not valid JSON of the expected shape.
+    #[error("model metadata: {0}")]
+    Metadata(String),
+    /// The model was made for different features, rig or rate.
+    #[error("model mismatch: {0}")]
+    Mismatch(String),
+    /// A weight is missing, mis-shaped or not finite.
+    #[error(transparent)]
+    Weight(#[from] WeightError),
+}
+
+/// What the model was trained on, for the record.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainingSummary {
+    /// Training dances.
+    pub dances: usize,
+    /// Training frames.
+    pub frames: usize,
+    /// Optimiser steps taken.
+    pub steps: u64,
+    /// Sequences seen.
+    pub sequences: u64,
+    /// Wall-clock training time, seconds.
+    pub seconds: f64,
+    /// Seed of the run.
+    pub seed: u64,
+    /// Last validation NLL, nats per frame (normalised features), if measured.
+    pub validation_nll: Option<f64>,
+}
+
+/// The metadata block.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelMeta {
+    /// File format version.
+    pub format_version: u32,
+    /// Frames per second.
+    pub frame_rate: f64,
+    /// Music look-ahead, frames.
+    pub lookahead_frames: usize,
+    /// Motion feature layout version.
+    pub motion_layout_version: u32,
+    /// Motion feature width.
+    pub motion_dim: usize,
+    /// Music feature layout version.
+    pub music_layout_version: u32,
+    /// Music feature width.
+    pub music_dim: usize,
+    /// Rig joints.
+    pub joint_count: usize,
+    /// Network sizes.
+    pub config: NetConfig,
+    /// Training record.
+    pub training: TrainingSummary,
+    /// Tensor names and shapes, in payload order.
+    pub tensors: Vec<(String, Vec<usize>)>,
+}
+
+/// A complete model: sizes, weights (with normalisation statistics) and training record.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NeuralModel {
+    /// Network sizes.
+    pub config: NetConfig,
+    /// All weights, including `norm.*` and `seed.pose`.
+    pub tensors: NamedTensors,
+    /// Training record.
+    pub training: TrainingSummary,
+}
+
+fn take<'a>(bytes: &mut &'a [u8], n: usize) -> Result<&'a [u8], ModelFileError> {
+    if bytes.len() < n {
+        return Err(ModelFileError::Truncated);
+    }
+    let (head, tail) = bytes.split_at(n);
+    *bytes = tail;
+    Ok(head)
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = flate2::Crc::new();
+    crc.update(bytes);
+    crc.sum()
+}
+
+impl NeuralModel {
+    /// Normalisation statistics stored in the weights.
+    pub fn normalizer(&self) -> Result<Normalizer, WeightError> {
+        let t = &self.tensors;
+        Ok(Normalizer {
+            pose_mean: t.get("norm.pose_mean", &[MOTION_FEATURE_DIM])?.to_vec(),
+            pose_std: t.get("norm.pose_std", &[MOTION_FEATURE_DIM])?.to_vec(),
+            music_mean: t.get("norm.music_mean", &[FEATURE_DIM])?.to_vec(),
+            music_std: t.get("norm.music_std", &[FEATURE_DIM])?.to_vec(),
+        })
+    }
+
+    /// Stores normalisation statistics in the weights.
+    pub fn set_normalizer(&mut self, n: &Normalizer) {
+        let t = &mut self.tensors;
+        t.insert("norm.pose_mean", &[MOTION_FEATURE_DIM], n.pose_mean.clone());
+        t.insert("norm.pose_std", &[MOTION_FEATURE_DIM], n.pose_std.clone());
+        t.insert("norm.music_mean", &[FEATURE_DIM], n.music_mean.clone());
+        t.insert("norm.music_std", &[FEATURE_DIM], n.music_std.clone());
+    }
+
+    /// The file's bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let meta = ModelMeta {
+            format_version: FORMAT_VERSION,
+            frame_rate: FRAME_RATE,
+            lookahead_frames: self.config.lookahead,
+            motion_layout_version: MOTION_LAYOUT_VERSION,
+            motion_dim: MOTION_FEATURE_DIM,
+            music_layout_version: FEATURE_LAYOUT_VERSION,
+            music_dim: FEATURE_DIM,
+            joint_count: JOINT_COUNT,
+            config: self.config,
+            training: self.training.clone(),
+            tensors: self
+                .tensors
+                .map
+                .iter()
+                .map(|(k, t)| (k.clone(), t.shape.clone()))
+                .collect(),
+        };
+        // Serialising plain data with string keys cannot fail.
+        let json = serde_json::to_vec(&meta).unwrap_or_default();
+        let mut out = Vec::with_capacity(64 + json.len() + 4 * self.tensors.parameter_count());
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        out.extend_from_slice(&(json.len() as u64).to_le_bytes());
+        out.extend_from_slice(&json);
+        for t in self.tensors.map.values() {
+            for v in &t.data {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let crc = crc32(&out);
+        out.extend_from_slice(&crc.to_le_bytes());
+        out
+    }
+
+    /// Parses and validates a model file's bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelFileError> {
+        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+            return Err(ModelFileError::BadMagic);
+        }
+        let mut rest = &bytes[MAGIC.len()..];
+        let version = u32::from_le_bytes(take(&mut rest, 4)?.try_into().unwrap_or_default());
+        if version != FORMAT_VERSION {
+            return Err(ModelFileError::Version { found: version });
+        }
+        let json_len = u64::from_le_bytes(take(&mut rest, 8)?.try_into().unwrap_or_default());
+        let json_len = usize::try_from(json_len).map_err(|_| ModelFileError::Truncated)?;
+        let json = take(&mut rest, json_len)?;
+        if bytes.len() < 4 {
+            return Err(ModelFileError::Truncated);
+        }
+        let meta: ModelMeta = serde_json::from_slice(json).map_err(|e| {
+            // A cut inside the JSON reads as a parse error; the checksum can tell which.
+            if crc32(&bytes[..bytes.len() - 4]).to_le_bytes() != bytes[bytes.len() - 4..] {
+                ModelFileError::Checksum
+            } else {
+                ModelFileError::Metadata(e.to_string())
+            }
+        })?;
+        let payload: usize = meta
+            .tensors
+            .iter()
+            .map(|(_, s)| s.iter().try_fold(1usize, |a, &b| a.checked_mul(b)))
+            .try_fold(0usize, |a, n| {
+                n.and_then(|n| a.checked_add(n.checked_mul(4)?))
+            })
+            .ok_or_else(|| ModelFileError::Metadata("tensor sizes overflow".into()))?;
+        if rest.len() < payload + 4 {
+            return Err(ModelFileError::Truncated);
+        }
+        if rest.len() > payload + 4 {
+            return Err(ModelFileError::Checksum);
+        }
+        let body = &bytes[..bytes.len() - 4];
+        if crc32(body).to_le_bytes() != bytes[bytes.len() - 4..] {
+            return Err(ModelFileError::Checksum);
+        }
+        let expect = |what: &str, found: String, want: String| {
+            if found == want {
+                Ok(())
+            } else {
+                Err(ModelFileError::Mismatch(format!(
+                    "{what} is {found}, this build needs {want}"
+                )))
+            }
+        };
+        expect(
+            "frame rate",
+            meta.frame_rate.to_string(),
+            FRAME_RATE.to_string(),
+        )?;
+        expect(
+            "motion layout",
+            format!("v{} × {}", meta.motion_layout_version, meta.motion_dim),
+            format!("v{MOTION_LAYOUT_VERSION} × {MOTION_FEATURE_DIM}"),
+        )?;
+        expect(
+            "music layout",
+            format!("v{} × {}", meta.music_layout_version, meta.music_dim),
+            format!("v{FEATURE_LAYOUT_VERSION} × {FEATURE_DIM}"),
+        )?;
+        expect(
+            "rig joint count",
+            meta.joint_count.to_string(),
+            JOINT_COUNT.to_string(),
+        )?;
+        expect(
+            "look-ahead",
+            meta.lookahead_frames.to_string(),
+            meta.config.lookahead.to_string(),
+        )?;
+        meta.config.check().map_err(ModelFileError::Mismatch)?;
+        let mut tensors = NamedTensors::default();
+        for (name, shape) in &meta.tensors {
+            let n: usize = shape.iter().product();
+            let raw = take(&mut rest, 4 * n)?;
+            let data = raw
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            tensors.map.insert(
+                name.clone(),
+                Tensor {
+                    shape: shape.clone(),
+                    data,
+                },
+            );
+        }
+        let model = NeuralModel {
+            config: meta.config,
+            tensors,
+            training: meta.training,
+        };
+        // Building the runtime checks every tensor the network needs (names, shapes, finite,
+        // invertible flow maps).
+        crate::neural::runtime::Runtime::new(&model.tensors, &model.config)?;
+        model.normalizer()?;
+        model.tensors.get("seed.pose", &[MOTION_FEATURE_DIM])?;
+        Ok(model)
+    }
+
+    /// Writes the model atomically (temporary file in the same folder, then rename).
+    pub fn save(&self, path: &Path) -> Result<(), ModelFileError> {
+        let bytes = self.to_bytes();
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+        let result = (|| {
+            let mut f = std::fs::File::create(&tmp)?;
+            f.write_all(&bytes)?;
+            f.sync_all()?;
+            std::fs::rename(&tmp, path)
+        })();
+        if result.is_err() {
+            let _ = std::fs::remove_file(&tmp);
+        }
+        Ok(result?)
+    }
+
+    /// Reads and validates a model file.
+    pub fn load(path: &Path) -> Result<Self, ModelFileError> {
+        Self::from_bytes(&std::fs::read(path)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::neural::tensors::init_net;
+
+    fn model() -> NeuralModel {
+        let c = NetConfig::tiny();
+        NeuralModel {
+            config: c,
+            tensors: init_net(&c, 3),
+            training: TrainingSummary {
+                dances: 2,
+                ..Default::default()
+            },
+        }
+    }
+
+    #[test]
+    fn round_trips_through_a_file() {
+        let m = model();
+        let dir = std::env::temp_dir().join(format!("danced-nn-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("m.dnn");
+        m.save(&path).unwrap();
+        assert_eq!(NeuralModel::load(&path).unwrap(), m);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn damaged_files_give_clear_errors() {
+        let bytes = model().to_bytes();
+        for cut in [0, 5, 13, 30, bytes.len() / 2, bytes.len() - 1] {
+            let e = NeuralModel::from_bytes(&bytes[..cut]).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    ModelFileError::Truncated | ModelFileError::BadMagic | ModelFileError::Checksum
+                ),
+                "cut at {cut}: {e}"
+            );
+        }
+        let mut flipped = bytes.clone();
+        let i = bytes.len() - 100;
+        flipped[i] ^= 0x40;
+        assert!(matches!(
+            NeuralModel::from_bytes(&flipped),
+            Err(ModelFileError::Checksum)
+        ));
+        let mut version = bytes.clone();
+        version[8] = 9;
+        assert!(matches!(
+            NeuralModel::from_bytes(&version),
+            Err(ModelFileError::Version { found: 9 })
+        ));
+        // A different rig: rewrite the metadata and fix the checksum so only the mismatch remains.
+        let pattern = b"\"joint_count\":22";
+        let at = bytes
+            .windows(pattern.len())
+            .position(|w| w == pattern)
+            .unwrap();
+        let mut other = bytes.clone();
+        other[at + pattern.len() - 1] = b'3';
+        let n = other.len() - 4;
+        let crc = crc32(&other[..n]).to_le_bytes();
+        other[n..].copy_from_slice(&crc);
+        let e = NeuralModel::from_bytes(&other).unwrap_err();
+        assert!(e.to_string().contains("rig joint count is 23"), "{e}");
+    }
+}

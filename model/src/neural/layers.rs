@@ -1,0 +1,134 @@
+//! Small burn building blocks (dense layer, layer norm) loaded from and stored to
+//! [`NamedTensors`], so training weights and live weights are the same numbers.
+
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::neural::tensors::{NamedTensors, WeightError};
+
+/// A trainable parameter from the named tensor `name` of shape `[n]`.
+pub fn param1(
+    t: &NamedTensors,
+    name: &str,
+    n: usize,
+    device: &Device,
+) -> Result<Param<Tensor<1>>, WeightError> {
+    let v = t.get(name, &[n])?.to_vec();
+    Ok(Param::from_tensor(Tensor::from_data(
+        TensorData::new(v, [n]),
+        device,
+    )))
+}
+
+/// A trainable parameter from the named tensor `name` of shape `[r, c]`.
+pub fn param2(
+    t: &NamedTensors,
+    name: &str,
+    r: usize,
+    c: usize,
+    device: &Device,
+) -> Result<Param<Tensor<2>>, WeightError> {
+    let v = t.get(name, &[r, c])?.to_vec();
+    Ok(Param::from_tensor(Tensor::from_data(
+        TensorData::new(v, [r, c]),
+        device,
+    )))
+}
+
+/// A constant (non-trainable) matrix.
+pub fn constant2(v: Vec<f32>, r: usize, c: usize, device: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(v, [r, c]), device)
+}
+
+/// The values of a tensor (empty if they cannot be read as f32, which later fails validation).
+pub fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .unwrap_or_default()
+}
+
+/// Stores a parameter under `name`.
+pub fn store<const D: usize>(t: &mut NamedTensors, name: &str, p: &Param<Tensor<D>>) {
+    let v = p.val();
+    let shape = v.dims().to_vec();
+    t.insert(name, &shape, values(v));
+}
+
+/// `x · w + b` with `w` of shape `[inputs, outputs]`.
+#[derive(Module, Debug)]
+pub struct Dense {
+    /// Weights `[inputs, outputs]`.
+    pub w: Param<Tensor<2>>,
+    /// Bias `[outputs]`.
+    pub b: Param<Tensor<1>>,
+}
+
+impl Dense {
+    /// Loads `name.w`, `name.b`.
+    pub fn load(
+        t: &NamedTensors,
+        name: &str,
+        i: usize,
+        o: usize,
+        device: &Device,
+    ) -> Result<Self, WeightError> {
+        Ok(Dense {
+            w: param2(t, &format!("{name}.w"), i, o, device)?,
+            b: param1(t, &format!("{name}.b"), o, device)?,
+        })
+    }
+
+    /// Stores `name.w`, `name.b`.
+    pub fn store(&self, t: &mut NamedTensors, name: &str) {
+        store(t, &format!("{name}.w"), &self.w);
+        store(t, &format!("{name}.b"), &self.b);
+    }
+
+    /// Applies the layer to rows `[n, inputs]`.
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        x.matmul(self.w.val()) + self.b.val().unsqueeze::<2>()
+    }
+}
+
+/// Epsilon of every layer norm (the live runtime uses the same).
+pub const LN_EPS: f32 = 1e-5;
+
+/// Layer normalisation over the last dimension with gain and bias.
+#[derive(Module, Debug)]
+pub struct LayerNorm {
+    /// Gain.
+    pub g: Param<Tensor<1>>,
+    /// Bias.
+    pub b: Param<Tensor<1>>,
+}
+
+impl LayerNorm {
+    /// Loads `name.g`, `name.b`.
+    pub fn load(
+        t: &NamedTensors,
+        name: &str,
+        d: usize,
+        device: &Device,
+    ) -> Result<Self, WeightError> {
+        Ok(LayerNorm {
+            g: param1(t, &format!("{name}.g"), d, device)?,
+            b: param1(t, &format!("{name}.b"), d, device)?,
+        })
+    }
+
+    /// Stores `name.g`, `name.b`.
+    pub fn store(&self, t: &mut NamedTensors, name: &str) {
+        store(t, &format!("{name}.g"), &self.g);
+        store(t, &format!("{name}.b"), &self.b);
+    }
+
+    /// Normalises rows `[n, d]`.
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        let mean = x.clone().mean_dim(1);
+        let centred = x - mean;
+        let var = centred.clone().powi_scalar(2).mean_dim(1);
+        centred / var.add_scalar(LN_EPS).sqrt() * self.g.val().unsqueeze::<2>()
+            + self.b.val().unsqueeze::<2>()
+    }
+}

@@ -1,0 +1,313 @@
+//! Training: sequences cut from normalised dances (teacher forcing, key poses drawn from the
+//! ground-truth future) and an Adam step on the exact NLL of every position.
+
+use burn::grad_clipping::GradientClippingConfig;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
+use crate::neural::config::NetConfig;
+use crate::neural::file::NeuralModel;
+use crate::neural::layers::values;
+use crate::neural::net::Net;
+use crate::neural::rng::Rng;
+use crate::neural::tensors::WeightError;
+use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
+use crate::neural::{cpu_device, training_device};
+use dsp::feature::FEATURE_DIM as M;
+
+/// Shortest key-pose horizon drawn in training, frames (0.5 s).
+pub const KEY_HORIZON_MIN: usize = 12;
+/// Longest key-pose horizon drawn in training, frames (4 s).
+pub const KEY_HORIZON_MAX: usize = 100;
+
+/// Standard deviation of the Gaussian noise added to training targets (normalised units):
+/// some features are (nearly) constant in the data, and a flow fitted to a degenerate
+/// dimension drives its density to infinity; the noise bounds it (validation is noise-free).
+pub const TARGET_NOISE: f32 = 0.03;
+
+/// One normalised dance.
+#[derive(Clone, Debug)]
+struct Dance {
+    motion: Vec<f32>,
+    music: Vec<f32>,
+    frames: usize,
+}
+
+/// Normalised dances to cut training sequences from.
+#[derive(Clone, Debug)]
+pub struct Corpus {
+    dances: Vec<Dance>,
+    config: NetConfig,
+}
+
+/// A batch of sequences: tokens `[b, window, TOKEN_DIM]` and targets `[b, window, P]`, flat.
+#[derive(Clone, Debug, Default)]
+pub struct Batch {
+    /// Sequences.
+    pub sequences: usize,
+    /// Tokens, flat.
+    pub tokens: Vec<f32>,
+    /// Next-pose targets (normalised), flat.
+    pub targets: Vec<f32>,
+}
+
+impl Corpus {
+    /// Normalises the dances (motion and its aligned music, frame for frame); dances too short
+    /// for one sequence are skipped.
+    pub fn new(
+        dances: &[(&[MotionFeatures], &[[f32; M]])],
+        norm: &Normalizer,
+        config: &NetConfig,
+    ) -> Self {
+        let need = config.window + config.lookahead + 1;
+        let dances = dances
+            .iter()
+            .filter(|(m, a)| m.len().min(a.len()) >= need)
+            .map(|(m, a)| {
+                let frames = m.len().min(a.len());
+                let mut motion = vec![0.0; frames * P];
+                let mut music = vec![0.0; frames * M];
+                for i in 0..frames {
+                    norm.pose(&m[i], &mut motion[i * P..(i + 1) * P]);
+                    norm.music(&a[i], &mut music[i * M..(i + 1) * M]);
+                }
+                Dance {
+                    motion,
+                    music,
+                    frames,
+                }
+            })
+            .collect();
+        Corpus {
+            dances,
+            config: *config,
+        }
+    }
+
+    /// Dances usable for sequences.
+    pub fn dances(&self) -> usize {
+        self.dances.len()
+    }
+
+    /// Total frames.
+    pub fn frames(&self) -> usize {
+        self.dances.iter().map(|d| d.frames).sum()
+    }
+
+    /// Appends the sequence of `dance` starting at frame `start`; `key` is (token at which the
+    /// key pose is set, its frame), if any.
+    fn push_sequence(
+        &self,
+        batch: &mut Batch,
+        dance: usize,
+        start: usize,
+        key: Option<(usize, usize)>,
+        mut noise: Option<&mut Rng>,
+    ) {
+        let d = &self.dances[dance];
+        let (s, l) = (self.config.window, self.config.lookahead);
+        let mut tok = vec![0.0; TOKEN_DIM];
+        for t in 0..s {
+            let f = start + t;
+            let pose = &d.motion[(f - 1) * P..f * P];
+            let music = &d.music[(f + l) * M..(f + l + 1) * M];
+            let k = key.and_then(|(at, kf)| {
+                (t >= at && f <= kf).then(|| {
+                    (
+                        &d.motion[kf * P + ROTATIONS..kf * P + ROTATIONS + KEY_ROT_DIM],
+                        (kf - f) as u32,
+                    )
+                })
+            });
+            token::fill(&mut tok, pose, music, k);
+            batch.tokens.extend_from_slice(&tok);
+            batch
+                .targets
+                .extend_from_slice(&d.motion[f * P..(f + 1) * P]);
+            if let Some(rng) = noise.as_mut() {
+                let n = batch.targets.len();
+                for v in &mut batch.targets[n - P..] {
+                    *v += TARGET_NOISE * rng.normal();
+                }
+            }
+        }
+        batch.sequences += 1;
+    }
+
+    /// A random batch; each sequence has a key pose with probability `1 − key_drop`.
+    pub fn random_batch(&self, rng: &mut Rng, sequences: usize, key_drop: f64) -> Batch {
+        let mut batch = Batch::default();
+        let (s, l) = (self.config.window, self.config.lookahead);
+        // Dances are drawn in proportion to their length, so every frame is equally likely.
+        let total = self.frames();
+        for _ in 0..sequences {
+            let mut pick = rng.below(total);
+            let mut dance = 0;
+            while pick >= self.dances[dance].frames {
+                pick -= self.dances[dance].frames;
+                dance += 1;
+            }
+            let n = self.dances[dance].frames;
+            let start = 1 + rng.below(n - s - l);
+            let key = (rng.uniform() >= key_drop).then(|| {
+                let at = rng.below(s);
+                let horizon = KEY_HORIZON_MIN + rng.below(KEY_HORIZON_MAX - KEY_HORIZON_MIN + 1);
+                (at, (start + at + horizon).min(n - 1))
+            });
+            self.push_sequence(&mut batch, dance, start, key, Some(rng));
+        }
+        batch
+    }
+
+    /// Every non-overlapping sequence, without key poses, in order (the validation set).
+    pub fn all_sequences(&self) -> Vec<Batch> {
+        let (s, l) = (self.config.window, self.config.lookahead);
+        let mut out = Vec::new();
+        let mut batch = Batch::default();
+        for (i, d) in self.dances.iter().enumerate() {
+            let mut start = 1;
+            while start + s + l <= d.frames {
+                self.push_sequence(&mut batch, i, start, None, None);
+                if batch.sequences == 16 {
+                    out.push(std::mem::take(&mut batch));
+                }
+                start += s;
+            }
+        }
+        if batch.sequences > 0 {
+            out.push(batch);
+        }
+        out
+    }
+}
+
+fn tensors(b: &Batch, device: &Device) -> (Tensor<3>, Tensor<3>) {
+    let s = b.tokens.len() / (b.sequences.max(1) * TOKEN_DIM);
+    (
+        Tensor::from_data(
+            TensorData::new(b.tokens.clone(), [b.sequences, s, TOKEN_DIM]),
+            device,
+        ),
+        Tensor::from_data(
+            TensorData::new(b.targets.clone(), [b.sequences, s, P]),
+            device,
+        ),
+    )
+}
+
+/// The network under training with its optimiser.
+pub struct Trainer {
+    net: Option<Net>,
+    optim: ModuleOptimizer,
+    device: Device,
+    model: NeuralModel,
+}
+
+impl Trainer {
+    /// Starts training from `model`'s weights (fresh or resumed; the optimiser starts fresh).
+    pub fn new(model: NeuralModel) -> Result<Self, WeightError> {
+        let device = training_device();
+        let net = Net::load(&model.tensors, &model.config, &device)?;
+        let optim = AdamConfig::new()
+            .with_grad_clipping(Some(GradientClippingConfig::Norm(1.0)))
+            .init();
+        Ok(Trainer {
+            net: Some(net),
+            optim,
+            device,
+            model,
+        })
+    }
+
+    /// Data-dependent initialisation of the flow's actnorms (fresh models only, before the first step).
+    pub fn data_init(&mut self, batch: &Batch) {
+        let (tok, tgt) = tensors(batch, &self.device);
+        self.net = self.net.take().map(|n| n.data_init(tok, tgt));
+    }
+
+    /// One optimiser step at learning rate `lr`; returns the batch's NLL, nats per frame (a
+    /// non-finite NLL skips the update).
+    pub fn step(&mut self, batch: &Batch, lr: f64) -> f32 {
+        let Some(net) = self.net.take() else {
+            return f32::NAN;
+        };
+        let (tok, tgt) = tensors(batch, &self.device);
+        let loss = net.nll(tok, tgt).mean();
+        let value = values(loss.clone()).first().copied().unwrap_or(f32::NAN);
+        if !value.is_finite() {
+            // Skip the update: one bad batch must not poison the weights.
+            self.net = Some(net);
+            return value;
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        self.net = Some(self.optim.step(lr, net, grads));
+        value
+    }
+
+    /// The current weights as a model (normalisation, seed and training record kept).
+    pub fn model(&mut self) -> &mut NeuralModel {
+        if let Some(net) = &self.net {
+            net.store(&mut self.model.tensors);
+        }
+        &mut self.model
+    }
+
+    /// Mean NLL over `batches`, nats per frame, without gradients.
+    pub fn evaluate(&mut self, batches: &[Batch]) -> Result<f64, WeightError> {
+        let device = cpu_device();
+        let config = self.model.config;
+        let net = Net::load(&self.model().tensors, &config, &device)?;
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for b in batches {
+            let (tok, tgt) = tensors(b, &device);
+            let v = values(net.nll(tok, tgt));
+            sum += v.iter().map(|&x| x as f64).sum::<f64>();
+            n += v.len();
+        }
+        Ok(sum / n.max(1) as f64)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::neural::file::TrainingSummary;
+    use crate::neural::tensors::init_net;
+
+    #[test]
+    fn a_few_steps_lower_the_nll_of_a_simple_dance() {
+        let c = NetConfig::tiny();
+        // A smooth, periodic "dance" with music that carries its phase.
+        let frames = 200;
+        let mut motion = vec![[0.0f32; P]; frames];
+        let mut music = vec![[0.0f32; M]; frames];
+        for i in 0..frames {
+            let ph = i as f32 * 0.3;
+            for (j, v) in motion[i].iter_mut().enumerate() {
+                *v = (ph + j as f32 * 0.1).sin();
+            }
+            music[i][0] = ph.sin();
+            music[i][1] = ph.cos();
+        }
+        let norm = Normalizer::fit(&motion, &music);
+        let corpus = Corpus::new(&[(&motion[..], &music[..])], &norm, &c);
+        let mut model = NeuralModel {
+            config: c,
+            tensors: init_net(&c, 1),
+            training: TrainingSummary::default(),
+        };
+        model.set_normalizer(&norm);
+        let mut tr = Trainer::new(model).unwrap();
+        let mut rng = Rng::new(2);
+        tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
+        let val = corpus.all_sequences();
+        let before = tr.evaluate(&val).unwrap();
+        for _ in 0..30 {
+            let b = corpus.random_batch(&mut rng, 8, 0.5);
+            assert!(tr.step(&b, 3e-3).is_finite());
+        }
+        let after = tr.evaluate(&val).unwrap();
+        assert!(after < before - 20.0, "NLL {before} → {after}");
+    }
+}
