@@ -43,17 +43,20 @@ pub fn default_source(seed: u64) -> Result<Box<dyn MotionSource + Send>> {
 pub fn training_library(data: &Path, jobs: usize) -> Result<(ClipLibrary, Vec<String>)> {
     let dances = crate::dataset::dances_with_split(data)
         .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-    let train: Vec<_> = dances
+    let built = crate::dataset::build_dances(
+        data,
+        &dances,
+        jobs,
+        |dance, validation| !validation && dance.audio.is_some(),
+        |_| {},
+    );
+    let (names, pairs): (Vec<String>, Vec<_>) = built
         .into_iter()
-        .filter(|(_, _, validation)| !validation)
-        .collect();
-    let built = crate::pool::parallel_map(&train, jobs, |(dir, name, _)| {
-        let dance = model::tang2018::load_dance(dir).ok()?;
-        dance.audio.as_ref()?;
-        let b = crate::dataset::build_dance(&dance, data, false).ok()?;
-        Some((name.clone(), (b.poses_on_default_rig(), b.music)))
-    });
-    let (names, pairs): (Vec<String>, Vec<_>) = built.into_iter().flatten().unzip();
+        .filter_map(|(name, r)| {
+            let b = r.ok()?;
+            Some((name, (b.poses_on_default_rig(), b.music)))
+        })
+        .unzip();
     anyhow::ensure!(
         !pairs.is_empty(),
         "no training dance with music under {}",

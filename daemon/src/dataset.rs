@@ -415,6 +415,29 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
     Ok(built)
 }
 
+/// Loads and builds ([`build_dance`]) the `dances` (as [`dances_with_split`] lists them) that
+/// `wanted` accepts (given the loaded dance and whether it is in the validation split), with
+/// `jobs` threads; `progress` hears each dance's name once it is done. One `(name, result)` per
+/// dance taken, in order; a dance that cannot be read or built carries the reason.
+pub fn build_dances(
+    data: &Path,
+    dances: &[(PathBuf, String, bool)],
+    jobs: usize,
+    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
+    progress: impl Fn(&str) + Sync,
+) -> Vec<(String, Result<BuiltDance, String>)> {
+    let results = crate::pool::parallel_map(dances, jobs.max(1), |(dir, name, validation)| {
+        let r = match load_dance(dir) {
+            Ok(d) if !wanted(&d, *validation) => None,
+            Ok(d) => Some(build_dance(&d, data, *validation)),
+            Err(e) => Some(Err(e.to_string())),
+        };
+        progress(name);
+        r.map(|r| (name.clone(), r))
+    });
+    results.into_iter().flatten().collect()
+}
+
 /// Writes the dances as one `.npz` (arrays `<name>/motion` and, with music, `<name>/music`,
 /// float32) plus a `.json` manifest beside it, both atomically.
 pub fn write_dataset(path: &Path, dances: &[BuiltDance]) -> Result<(), String> {

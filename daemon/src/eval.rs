@@ -21,7 +21,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use model::metrics::{
     ContactParams, FreezeParams, JointTrack, beat_align, beat_offset, detect_freezes, dist_k,
-    fid_k, fmd, foot_skating, fpd, kinetic_features,
+    fid_k, fmd, foot_skating, fpd, kinetic_features, toe_floor_y,
 };
 use model::retrieval::{ClipLibrary, RetrievalDancer};
 use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
@@ -96,18 +96,15 @@ impl EvalSet {
     pub fn load(data: &Path, jobs: usize) -> Result<EvalSet> {
         let dances = crate::dataset::dances_with_split(data)
             .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-        let built = crate::pool::parallel_map(&dances, jobs, |(dir, _, validation)| {
-            let dance = model::tang2018::load_dance(dir).ok()?;
-            dance.audio.as_ref()?;
-            crate::dataset::build_dance(&dance, data, *validation).ok()
-        });
+        let built =
+            crate::dataset::build_dances(data, &dances, jobs, |d, _| d.audio.is_some(), |_| {});
         let skeleton = Skeleton::default_adult();
         let mut set = EvalSet {
             validation: Vec::new(),
             train_positions: Vec::new(),
             train_kinetic: Vec::new(),
         };
-        for b in built.into_iter().flatten() {
+        for b in built.into_iter().filter_map(|(_, r)| r.ok()) {
             let poses = b.poses_on_default_rig();
             if !b.validation {
                 let p = skeleton.trajectory(&poses);
@@ -176,13 +173,7 @@ impl EvalSet {
                 row.beat_offset_s += o.mean_s / n as f64;
             }
             row.freezes += detect_freezes(track, FreezeParams::default())?.freezes;
-            let mut heights: Vec<f64> = track
-                .positions()
-                .chunks_exact(JOINT_COUNT)
-                .flat_map(|f| toes.map(|t| f[t].y as f64))
-                .collect();
-            heights.sort_by(f64::total_cmp);
-            let ground_y_m = heights.get(heights.len() / 20).copied().unwrap_or(0.0);
+            let ground_y_m = toe_floor_y(track, &toes)?;
             let s = foot_skating(
                 track,
                 &toes,

@@ -44,8 +44,9 @@ pub fn target_at(cues: &[KeyCue], frame: usize, lead_frames: usize) -> Option<Ke
         })
 }
 
-/// Joint positions relative to the hips with the heading removed, on the default rig.
-fn shape(rotations: &[Quat; JOINT_COUNT]) -> [Vec3; JOINT_COUNT] {
+/// A pose's body shape: joint positions relative to the hips with the heading removed, on the
+/// default rig (what a key pose fixes; where the dancer stands and faces is not part of it).
+pub fn body_shape(rotations: &[Quat; JOINT_COUNT]) -> [Vec3; JOINT_COUNT] {
     let mut pose = Pose::rest();
     pose.local_rotations = *rotations;
     let h = heading(pose.local_rotations[0]);
@@ -60,7 +61,7 @@ fn shape(rotations: &[Quat; JOINT_COUNT]) -> [Vec3; JOINT_COUNT] {
 /// Mean joint position error between a pose and a key pose, cm (body shape only: where the
 /// dancer stands and which way it faces are not part of a key pose).
 pub fn key_pose_error_cm(pose: &Pose, target: &[Quat; JOINT_COUNT]) -> f64 {
-    let (a, b) = (shape(&pose.local_rotations), shape(target));
+    let (a, b) = (body_shape(&pose.local_rotations), body_shape(target));
     100.0
         * a.iter()
             .zip(&b)

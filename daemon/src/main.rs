@@ -853,13 +853,7 @@ fn motion_metrics(bvh_path: &std::path::Path, audio: &std::path::Path, offset: f
         f.freezes, f.frozen_s, f.analysed_s
     );
     let toes = [Joint::LeftToes.index(), Joint::RightToes.index()];
-    // Captures put the floor anywhere: take it as the 5th percentile of the toes' heights.
-    let mut heights: Vec<f64> = positions
-        .chunks_exact(JOINT_COUNT)
-        .flat_map(|f| toes.map(|t| f[t].y as f64))
-        .collect();
-    heights.sort_by(f64::total_cmp);
-    let ground_y_m = heights.get(heights.len() / 20).copied().unwrap_or(0.0);
+    let ground_y_m = model::metrics::toe_floor_y(&track, &toes)?;
     let s = model::metrics::foot_skating(
         &track,
         &toes,
@@ -879,16 +873,19 @@ fn motion_metrics(bvh_path: &std::path::Path, audio: &std::path::Path, offset: f
 fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> Result<()> {
     let dances = daemon::dataset::dances_with_split(data)
         .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-    let pb = count_bar(dances.len() as u64);
+    let count = dances.len();
+    let pb = count_bar(count as u64);
     let started = Instant::now();
-    let results = daemon::pool::parallel_map(&dances, jobs, |(dir, name, validation)| {
-        let r = model::tang2018::load_dance(dir)
-            .map_err(|e| e.to_string())
-            .and_then(|d| daemon::dataset::build_dance(&d, data, *validation));
-        pb.set_message(name.clone());
-        pb.inc(1);
-        (name.clone(), r)
-    });
+    let results = daemon::dataset::build_dances(
+        data,
+        &dances,
+        jobs,
+        |_, _| true,
+        |name| {
+            pb.set_message(name.to_string());
+            pb.inc(1);
+        },
+    );
     pb.finish_and_clear();
     let mut built = Vec::new();
     let mut skipped = Vec::new();

@@ -76,23 +76,26 @@ pub struct BenchModelArgs {
 fn load_dances(data: &Path, jobs: usize) -> Result<Vec<BuiltDance>> {
     let dances = crate::dataset::dances_with_split(data)
         .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-    let pb = ProgressBar::new(dances.len() as u64);
+    let count = dances.len();
+    let pb = ProgressBar::new(count as u64);
     pb.set_style(
         ProgressStyle::with_template("building dances {bar:30} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let built = crate::pool::parallel_map(&dances, jobs.max(1), |(dir, name, validation)| {
-        let r = model::tang2018::load_dance(dir)
-            .map_err(|e| e.to_string())
-            .and_then(|d| crate::dataset::build_dance(&d, data, *validation));
-        pb.set_message(name.clone());
-        pb.inc(1);
-        r
-    });
+    let built = crate::dataset::build_dances(
+        data,
+        &dances,
+        jobs,
+        |_, _| true,
+        |name| {
+            pb.set_message(name.to_string());
+            pb.inc(1);
+        },
+    );
     pb.finish_and_clear();
     let built: Vec<BuiltDance> = built
         .into_iter()
-        .filter_map(|r| r.ok())
+        .filter_map(|(_, r)| r.ok())
         .filter(|d| !d.music.is_empty())
         .collect();
     if built.is_empty() {

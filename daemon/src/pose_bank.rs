@@ -186,9 +186,8 @@ impl PoseBank {
 }
 
 /// Picks `count` poses from `library` as far apart as possible (farthest-point sampling on
-/// the joints' world positions relative to the hips, heading removed), deterministic.
+/// their [`body_shape`](crate::key_cue::body_shape)s), deterministic.
 pub fn pick_diverse_poses(library: &ClipLibrary, count: usize) -> Vec<Pose> {
-    let skeleton = Skeleton::default_adult();
     // Every 5th pose is plenty (clips move little in 0.2 s) and keeps this quick.
     let candidates: Vec<Pose> = library
         .poses
@@ -202,13 +201,10 @@ pub fn pick_diverse_poses(library: &ClipLibrary, count: usize) -> Vec<Pose> {
             q
         })
         .collect();
-    let shape = |p: &Pose| {
-        let mut w = [Vec3::ZERO; JOINT_COUNT];
-        skeleton.world_positions(p, &mut w);
-        let hips = w[Joint::Hips.index()];
-        w.map(|x| x - hips)
-    };
-    let shapes: Vec<[Vec3; JOINT_COUNT]> = candidates.iter().map(shape).collect();
+    let shapes: Vec<[Vec3; JOINT_COUNT]> = candidates
+        .iter()
+        .map(|p| crate::key_cue::body_shape(&p.local_rotations))
+        .collect();
     let dist = |a: &[Vec3; JOINT_COUNT], b: &[Vec3; JOINT_COUNT]| {
         a.iter()
             .zip(b)

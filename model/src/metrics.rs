@@ -31,6 +31,7 @@ pub use kinetic::{
 };
 pub use quality::{
     ContactParams, FootSkating, FreezeParams, FreezeReport, detect_freezes, foot_skating,
+    toe_floor_y,
 };
 
 use glam::{DVec3, Vec3};

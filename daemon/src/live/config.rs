@@ -151,19 +151,13 @@ pub struct VrchatConfig {
 
 impl Default for VrchatConfig {
     fn default() -> Self {
-        let trackers = [
-            ("1", "Hips"),
-            ("2", "Chest"),
-            ("3", "LeftFoot"),
-            ("4", "RightFoot"),
-            ("5", "LeftLowerLeg"),
-            ("6", "RightLowerLeg"),
-            ("7", "LeftLowerArm"),
-            ("8", "RightLowerArm"),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
+        // protocols' default assignment, numbered from 1 as VRChat numbers its trackers.
+        let trackers = protocols::VrchatTrackerMap::default()
+            .trackers
+            .into_iter()
+            .enumerate()
+            .map(|(i, bone)| ((i + 1).to_string(), bone))
+            .collect();
         Self {
             enabled: false,
             target: "127.0.0.1:9000".into(),

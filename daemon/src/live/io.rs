@@ -59,7 +59,7 @@ impl OscSink {
         }
         let map = VrchatTrackerMap {
             trackers,
-            head: Some("Head".into()),
+            ..VrchatTrackerMap::default()
         };
         let out = OscOutput::with_encoders(
             targets,

@@ -106,6 +106,21 @@ pub fn detect_freezes(
     Ok(report)
 }
 
+/// Where the floor is for [`foot_skating`] when a capture does not say: the 5th percentile of
+/// the toes' heights over the whole track (captures put the floor anywhere; a few frames of
+/// noise below it must not count), in metres; 0 for an empty track.
+pub fn toe_floor_y(track: &JointTrack<'_>, toe_joints: &[usize]) -> Result<f64, MetricsError> {
+    for &toe in toe_joints {
+        track.check_joint(toe)?;
+    }
+    let mut heights: Vec<f64> = (0..track.frames())
+        .flat_map(|f| toe_joints.iter().map(move |&t| (f, t)))
+        .map(|(f, t)| track.pos(f, t).y)
+        .collect();
+    heights.sort_by(f64::total_cmp);
+    Ok(heights.get(heights.len() / 20).copied().unwrap_or(0.0))
+}
+
 /// When [`foot_skating`] considers a toe to be on the ground.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContactParams {
@@ -218,6 +233,22 @@ mod tests {
             p.push(Vec3::new(0.3 * phase.cos() as f32, 1.4, 0.0));
         }
         p
+    }
+
+    #[test]
+    fn toe_floor_is_the_fifth_percentile_of_toe_heights() {
+        // Joint 0 (a toe) at heights 0.00, 0.01, …, 0.99 m; joint 1 high above, not a toe.
+        let p: Vec<Vec3> = (0..100)
+            .flat_map(|i| {
+                [
+                    Vec3::new(0.0, i as f32 * 0.01, 0.0),
+                    Vec3::new(0.0, 5.0, 0.0),
+                ]
+            })
+            .collect();
+        let track = JointTrack::new(&p, 2, FPS).unwrap();
+        assert!((toe_floor_y(&track, &[0]).unwrap() - 0.05).abs() < 1e-6);
+        assert!(toe_floor_y(&track, &[2]).is_err());
     }
 
     #[test]
