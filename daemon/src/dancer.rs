@@ -1,11 +1,102 @@
-//! The shipped dancer: the retrieval dancer playing the clip library that is built into the
-//! binary, and the builder that cuts that library from the tang2018 training split.
+//! The shipped dancers: the neural dancer with the model built into the binary, the retrieval
+//! dancer playing the clip library built into the binary, and the builder that cuts that
+//! library from the tang2018 training split.
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
+use model::neural::dancer::NeuralDancer;
+use model::neural::file::NeuralModel;
 use model::retrieval::{ClipLibrary, RetrievalDancer};
 use model::source::MotionSource;
+
+/// The neural dance model shipped in the repository (`configs/models/default.dnn`).
+pub const SHIPPED_MODEL: &[u8] = include_bytes!("../../configs/models/default.dnn");
+
+/// Path of the shipped model relative to the repository root (for messages).
+pub const SHIPPED_MODEL_PATH: &str = "configs/models/default.dnn";
+
+/// Which motion source drives the character.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SourceKind {
+    /// The causal transformer with a normalizing-flow head (`configs/models/default.dnn`).
+    Neural,
+    /// One-beat clips of the training dances, time-warped to the live beat.
+    Retrieval,
+}
+
+impl SourceKind {
+    /// The source `run`, `demo` and `generate` use when none is named.
+    pub const DEFAULT: SourceKind = SourceKind::Retrieval;
+
+    /// Every source, for messages.
+    pub const NAMES: &str = "neural, retrieval";
+
+    /// The source called `name` in configuration files and on the command line.
+    pub fn parse(name: &str) -> Option<SourceKind> {
+        match name {
+            "neural" => Some(SourceKind::Neural),
+            "retrieval" => Some(SourceKind::Retrieval),
+            _ => None,
+        }
+    }
+
+    /// The name `parse` accepts.
+    pub fn name(self) -> &'static str {
+        match self {
+            SourceKind::Neural => "neural",
+            SourceKind::Retrieval => "retrieval",
+        }
+    }
+}
+
+/// Where a source's data comes from (`None` = the one built into danced).
+#[derive(Clone, Debug, Default)]
+pub struct SourceFiles<'a> {
+    /// Neural model file.
+    pub model: Option<&'a Path>,
+    /// Clip library file.
+    pub library: Option<&'a Path>,
+}
+
+/// Reads the neural model from `path`, or the shipped one when `path` is `None`.
+pub fn load_model(path: Option<&Path>) -> Result<NeuralModel> {
+    match path {
+        None => NeuralModel::from_bytes(SHIPPED_MODEL)
+            .with_context(|| format!("reading the built-in model ({SHIPPED_MODEL_PATH})")),
+        Some(p) => NeuralModel::load(p).with_context(|| format!("reading {}", p.display())),
+    }
+}
+
+/// The neural dancer on `model`, seeded with `seed`.
+pub fn neural_dancer(model: &NeuralModel, seed: u64) -> Result<NeuralDancer> {
+    let mut d = NeuralDancer::new(model).context("starting the neural dancer")?;
+    d.reset(seed);
+    Ok(d)
+}
+
+/// Opens the motion source `kind` from `files`, seeded with `seed`.
+pub fn open_source(
+    kind: SourceKind,
+    files: &SourceFiles<'_>,
+    seed: u64,
+) -> Result<Box<dyn MotionSource + Send>> {
+    Ok(match kind {
+        SourceKind::Neural => {
+            if files.library.is_some() {
+                bail!("a clip library is for the retrieval source, not the neural one");
+            }
+            Box::new(neural_dancer(&load_model(files.model)?, seed)?)
+        }
+        SourceKind::Retrieval => {
+            if files.model.is_some() {
+                bail!("a model file is for the neural source, not the retrieval one");
+            }
+            let (library, _) = load_library(files.library)?;
+            Box::new(RetrievalDancer::new(library, seed).context("starting the retrieval dancer")?)
+        }
+    })
+}
 
 /// The clip library shipped in the repository (`configs/clips/tang2018-train.danclips`).
 pub const SHIPPED_CLIPS: &[u8] = include_bytes!("../../configs/clips/tang2018-train.danclips");
@@ -30,12 +121,9 @@ pub fn load_library(path: Option<&Path>) -> Result<(ClipLibrary, String)> {
     }
 }
 
-/// The default motion source: the retrieval dancer on the shipped clip library.
+/// The default motion source on its built-in data.
 pub fn default_source(seed: u64) -> Result<Box<dyn MotionSource + Send>> {
-    let (library, _) = load_library(None)?;
-    Ok(Box::new(
-        RetrievalDancer::new(library, seed).context("starting the retrieval dancer")?,
-    ))
+    open_source(SourceKind::DEFAULT, &SourceFiles::default(), seed)
 }
 
 /// Cuts the full clip library from the training split of `data/tang2018` (fitted, aligned and
@@ -76,4 +164,21 @@ pub fn library_metadata(library: &ClipLibrary, dances: &[String], full_poses: us
         crate::dataset::DATASET_VERSION,
         names.join(", ")
     )
+}
+
+/// Motion features of standing still in the pose `rotations` (hips at the default rig's
+/// height): a seed ("motion prompt") for the neural dancer.
+pub fn standing_features(
+    rotations: &[glam::Quat; model::rig::JOINT_COUNT],
+) -> model::motion::MotionFeatures {
+    let skeleton = model::rig::Skeleton::default_adult();
+    let mut pose = model::rig::Pose::rest();
+    pose.local_rotations = *rotations;
+    pose.root_position = glam::Vec3::new(0.0, skeleton.hip_height(), 0.0);
+    let mut encoder = model::motion::MotionEncoder::new();
+    let mut out = [0.0; model::motion::MOTION_FEATURE_DIM];
+    // The second frame of a still pose: zero velocities.
+    encoder.encode_frame(&pose, &mut out);
+    encoder.encode_frame(&pose, &mut out);
+    out
 }

@@ -306,6 +306,18 @@ impl BuiltDance {
     /// and shifted so the floor found under the toes is at 0, so clips of different dances
     /// neither float, sink nor jump when played in turn.
     pub fn poses_on_default_rig(&self) -> Vec<model::rig::Pose> {
+        self.default_rig_poses()
+    }
+
+    /// Motion features of [`BuiltDance::poses_on_default_rig`]: what the neural dancer learns,
+    /// so its hips stay at the character's height instead of the captures' drifting floor.
+    pub fn motion_on_default_rig(&self) -> Vec<model::motion::MotionFeatures> {
+        let mut out = Vec::with_capacity(self.motion.len());
+        model::motion::encode(&self.default_rig_poses(), &mut out);
+        out
+    }
+
+    fn default_rig_poses(&self) -> Vec<model::rig::Pose> {
         use model::rig::{Joint, Skeleton};
         let mut poses = Vec::new();
         model::motion::decode(&self.motion, model::motion::RootState::ORIGIN, &mut poses);

@@ -19,6 +19,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use glam::Quat;
 use model::metrics::{
     ContactParams, FreezeParams, JointTrack, beat_align, beat_offset, detect_freezes, dist_k,
     fid_k, fmd, foot_skating, fpd, kinetic_features, toe_floor_y,
@@ -28,6 +29,7 @@ use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use model::source::{Controls, MotionSource};
 use model::tang2018::TANG_FPS;
 
+use crate::key_cue::{KeyCue, key_pose_error_cm, target_at};
 use crate::output::read_times;
 
 /// Length of the windows kinetic features are computed on, frames (5 s at 25 fps).
@@ -206,26 +208,15 @@ impl EvalSet {
         temperature: f32,
         seed: u64,
     ) -> (Vec<Vec<Pose>>, f64) {
-        let controls = Controls {
-            temperature,
-            key_pose: None,
-        };
-        let look = source.lookahead_frames();
-        let mut steps = 0usize;
         let started = std::time::Instant::now();
-        let motions = self
+        let mut steps = 0usize;
+        let motions: Vec<Vec<Pose>> = self
             .validation
             .iter()
             .map(|d| {
-                source.reset(seed);
-                let mut pose = Pose::rest();
-                let mut out = Vec::with_capacity(d.music.len());
-                for i in 0..d.music.len().saturating_sub(look) {
-                    source.step(&d.music[i..=i + look], &controls, &mut pose);
-                    out.push(pose);
-                    steps += 1;
-                }
-                out
+                let m = dance_to(source, &d.music, d.music.len(), temperature, seed, &[], 0);
+                steps += m.len();
+                m
             })
             .collect();
         (
@@ -233,6 +224,211 @@ impl EvalSet {
             started.elapsed().as_secs_f64() * 1e6 / steps.max(1) as f64,
         )
     }
+
+    /// Mean joint error (cm) at the target frame of key poses announced `horizon_s` ahead:
+    /// on every validation song, a pose of `bank` (in turn) is due every
+    /// [`KEY_CUE_SPACING_S`] from [`KEY_CUE_SPACING_S`] / 2 on. Returns the error and the cue count.
+    pub fn key_pose_error(
+        &self,
+        source: &mut dyn MotionSource,
+        temperature: f32,
+        seed: u64,
+        bank: &[[Quat; JOINT_COUNT]],
+        horizon_s: f64,
+    ) -> (f64, usize) {
+        let lead = (horizon_s * TANG_FPS).round() as usize;
+        let spacing = (KEY_CUE_SPACING_S * TANG_FPS).round() as usize;
+        let (mut sum, mut count) = (0.0, 0usize);
+        for (i, d) in self.validation.iter().enumerate() {
+            let frames = d.music.len().saturating_sub(source.lookahead_frames());
+            let cues: Vec<KeyCue> = (0..)
+                .map(|k| spacing / 2 + k * spacing)
+                .take_while(|&f| f < frames)
+                .enumerate()
+                .map(|(k, frame)| KeyCue {
+                    name: String::new(),
+                    rotations: bank[(i * 5 + k) % bank.len()],
+                    frame,
+                })
+                .collect();
+            let motion = dance_to(source, &d.music, frames, temperature, seed, &cues, lead);
+            for c in &cues {
+                if let Some(p) = motion.get(c.frame) {
+                    sum += key_pose_error_cm(p, &c.rotations);
+                    count += 1;
+                }
+            }
+        }
+        (sum / count.max(1) as f64, count)
+    }
+
+    /// Freezes in [`LONG_RUN_S`] of dancing to every validation song, its music looped.
+    pub fn long_run_freezes(
+        &self,
+        source: &mut dyn MotionSource,
+        temperature: f32,
+        seed: u64,
+    ) -> Result<LongRun> {
+        let frames = (LONG_RUN_S * TANG_FPS) as usize;
+        let skeleton = Skeleton::default_adult();
+        let mut run = LongRun::default();
+        for d in &self.validation {
+            let music: Vec<_> = d.music.iter().cycle().take(frames + 8).copied().collect();
+            let motion = dance_to(source, &music, frames, temperature, seed, &[], 0);
+            let p = skeleton.trajectory(&motion);
+            let track = JointTrack::new(&p, JOINT_COUNT, TANG_FPS)?;
+            let f = detect_freezes(&track, FreezeParams::default())?.freezes;
+            run.freezes += f;
+            run.songs_with_freezes += usize::from(f > 0);
+            run.seconds += track.duration_s();
+        }
+        Ok(run)
+    }
+}
+
+/// Seconds between key poses in the key-pose evaluation.
+pub const KEY_CUE_SPACING_S: f64 = 8.0;
+
+/// Key-pose horizons scored by `danced eval`, seconds.
+pub const KEY_HORIZONS_S: [f64; 4] = [0.5, 1.0, 2.0, 4.0];
+
+/// Length of the long runs `danced eval` checks for freezes, seconds (5 minutes).
+pub const LONG_RUN_S: f64 = 300.0;
+
+/// Freezes over long runs.
+#[derive(Clone, Debug, Default)]
+pub struct LongRun {
+    /// Freezes, summed over songs.
+    pub freezes: usize,
+    /// Songs with at least one freeze.
+    pub songs_with_freezes: usize,
+    /// Seconds danced.
+    pub seconds: f64,
+}
+
+/// Runs `source` (reset with `seed`) over `frames` frames of `music` at `temperature`, with the
+/// key poses `cues` announced `lead` frames ahead; every step sees its frame and the source's
+/// look-ahead, as the live pipeline hands them over.
+pub fn dance_to(
+    source: &mut dyn MotionSource,
+    music: &[[f32; dsp::feature::FEATURE_DIM]],
+    frames: usize,
+    temperature: f32,
+    seed: u64,
+    cues: &[KeyCue],
+    lead: usize,
+) -> Vec<Pose> {
+    let look = source.lookahead_frames();
+    source.reset(seed);
+    let mut pose = Pose::rest();
+    let frames = frames.min(music.len().saturating_sub(look));
+    let mut out = Vec::with_capacity(frames);
+    for i in 0..frames {
+        let controls = Controls {
+            temperature,
+            key_pose: target_at(cues, i, lead),
+        };
+        source.step(&music[i..=i + look], &controls, &mut pose);
+        out.push(pose);
+    }
+    out
+}
+
+/// Songs with exact beats that are in no training dance (`synth-beats`): only the music-side
+/// metrics apply (no ground-truth motion).
+pub struct MusicSet {
+    songs: Vec<(String, Vec<[f32; dsp::feature::FEATURE_DIM]>, Vec<f64>)>,
+}
+
+/// A music-side row: how the motion follows songs the model never saw.
+#[derive(Clone, Debug, Default)]
+pub struct MusicRow {
+    /// What produced the motion.
+    pub system: String,
+    /// BeatAlign against the song's exact beats.
+    pub beat_align: f64,
+    /// BeatAlign against the next three songs' beats.
+    pub beat_align_other: f64,
+    /// Transflower beat offset, seconds.
+    pub beat_offset_s: f64,
+    /// Freezes, summed over songs.
+    pub freezes: usize,
+    /// Songs scored.
+    pub songs: usize,
+}
+
+impl MusicSet {
+    /// Analyses every song of `data/synth-beats` with the streaming analysis at 25 fps.
+    pub fn load(data: &Path) -> Result<MusicSet> {
+        let set = crate::bench::synth_set(data);
+        anyhow::ensure!(
+            !set.items.is_empty(),
+            "no songs under {}",
+            data.join("synth-beats").display()
+        );
+        let mut songs = Vec::new();
+        for item in set.items {
+            let a = crate::offline::analyze_file(
+                &item.audio,
+                crate::offline::AnalyzeOptions::native(Some(TANG_FPS)),
+                &mut |_, _| {},
+            )
+            .with_context(|| format!("analysing {}", item.audio.display()))?;
+            songs.push((
+                item.name,
+                a.features.iter().map(|f| f.values).collect(),
+                item.beats,
+            ));
+        }
+        Ok(MusicSet { songs })
+    }
+
+    /// Dances `source` to every song and scores the motion against the beats.
+    pub fn score(
+        &self,
+        system: &str,
+        source: &mut dyn MotionSource,
+        temperature: f32,
+        seed: u64,
+    ) -> Result<MusicRow> {
+        let skeleton = Skeleton::default_adult();
+        let n = self.songs.len();
+        let mut row = MusicRow {
+            system: system.into(),
+            songs: n,
+            ..MusicRow::default()
+        };
+        for (i, (_, music, beats)) in self.songs.iter().enumerate() {
+            let motion = dance_to(source, music, music.len(), temperature, seed, &[], 0);
+            let p = skeleton.trajectory(&motion);
+            let track = JointTrack::new(&p, JOINT_COUNT, TANG_FPS)?;
+            row.beat_align += beat_align(&track, beats) / n as f64;
+            let others: Vec<f64> = (1..=3.min(n - 1))
+                .map(|k| beat_align(&track, &self.songs[(i + k) % n].2))
+                .collect();
+            row.beat_align_other +=
+                others.iter().sum::<f64>() / others.len().max(1) as f64 / n as f64;
+            if let Ok(o) = beat_offset(&track, Joint::Hips.index(), beats) {
+                row.beat_offset_s += o.mean_s / n as f64;
+            }
+            row.freezes += detect_freezes(&track, FreezeParams::default())?.freezes;
+        }
+        Ok(row)
+    }
+}
+
+/// The music-side table of `danced eval`.
+pub fn music_table(rows: &[MusicRow]) -> String {
+    let mut s = String::from(
+        "| system | BeatAlign ↑ | vs other songs | beat offset s ↓ | freezes |\n| --- | --- | --- | --- | --- |\n",
+    );
+    for r in rows {
+        s += &format!(
+            "| {} | {:.3} | {:.3} | {:.3} | {} |\n",
+            r.system, r.beat_align, r.beat_align_other, r.beat_offset_s, r.freezes
+        );
+    }
+    s
 }
 
 /// The retrieval dancer on `library`, for rows.

@@ -78,7 +78,16 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             desc
         }
     };
-    let source = crate::dancer::default_source(config.dancer.seed)?;
+    let kind = crate::dancer::SourceKind::parse(&config.dancer.source)
+        .with_context(|| format!("unknown motion source {:?}", config.dancer.source))?;
+    let source = crate::dancer::open_source(
+        kind,
+        &crate::dancer::SourceFiles {
+            model: config.dancer.model.as_deref(),
+            library: config.dancer.library.as_deref(),
+        },
+        config.dancer.seed,
+    )?;
     let poses = match &config.control.poses {
         Some(p) => crate::pose_bank::PoseBank::load(p)?,
         None => crate::pose_bank::PoseBank::shipped()?,

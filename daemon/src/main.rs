@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tracing_subscriber::EnvFilter;
 
 use daemon::bench;
+use daemon::dancer::{SourceFiles, SourceKind};
 use daemon::live::config::Config;
 use daemon::live_cli::{AudioSource, RunMode, run_live, summary};
 use daemon::offline::{AnalyzeOptions, analyze_file, analyze_samples};
@@ -78,6 +79,8 @@ enum Command {
         /// Write the run's stats as JSON here.
         #[arg(long)]
         stats_json: Option<PathBuf>,
+        #[command(flatten)]
+        dancer: SourceArgs,
     },
     /// List the audio inputs.
     Devices,
@@ -98,6 +101,12 @@ enum Command {
         /// Also score the retrieval dancer on the full library cut from the training split.
         #[arg(long)]
         full_library: bool,
+        /// Neural model of the neural rows (default: the built-in one).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Only the table of the validation dances (no key poses, unseen songs or long runs).
+        #[arg(long)]
+        quick: bool,
         /// Random seed of the generated rows.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -150,9 +159,8 @@ struct GenerateArgs {
     /// Output BVH file.
     #[arg(long)]
     out: PathBuf,
-    /// Motion source (only the retrieval dancer exists so far).
-    #[arg(long, default_value = "retrieval")]
-    source: String,
+    #[command(flatten)]
+    dancer: SourceArgs,
     /// Stop after this many seconds of audio.
     #[arg(long)]
     seconds: Option<f64>,
@@ -162,12 +170,13 @@ struct GenerateArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Clip library file (default: the one built into danced).
-    #[arg(long, conflicts_with = "data")]
-    library: Option<PathBuf>,
-    /// Cut the full clip library from this data folder's tang2018 training split instead.
-    #[arg(long)]
+    /// Retrieval source: cut the full clip library from this data folder's tang2018 training
+    /// split instead of using a library file.
+    #[arg(long, conflicts_with = "library")]
     data: Option<PathBuf>,
+    /// Neural source: start from this bank pose (the "motion prompt") instead of the model's seed.
+    #[arg(long)]
+    seed_pose: Option<String>,
     /// Reach a key pose of the bank at a time: NAME@SECONDS (repeatable), e.g. pose-3@12.5.
     #[arg(long = "keypose")]
     key_poses: Vec<String>,
@@ -224,6 +233,8 @@ enum BenchCommand {
         /// Write the stats as JSON here.
         #[arg(long)]
         stats_json: Option<PathBuf>,
+        #[command(flatten)]
+        dancer: SourceArgs,
     },
     /// Per-frame sampling time of the neural dancer on one thread (p50, p99).
     Model(daemon::neural::BenchModelArgs),
@@ -279,9 +290,53 @@ struct RunArgs {
     /// Key-pose bank (TOML; default: the built-in configs/poses/bank.toml).
     #[arg(long)]
     poses: Option<PathBuf>,
+    #[command(flatten)]
+    dancer: SourceArgs,
     /// MIDI map (TOML; default: the built-in configs/midi/generic.toml).
     #[arg(long)]
     midi_map: Option<PathBuf>,
+}
+
+/// Which dancer, and from which files.
+#[derive(clap::Args, Debug, Clone, Default)]
+struct SourceArgs {
+    /// Motion source (default: the configuration's, else the built-in default).
+    #[arg(long, value_enum)]
+    source: Option<SourceKind>,
+    /// Neural model file (default: the built-in configs/models/default.dnn).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Clip library file of the retrieval source (default: the built-in one).
+    #[arg(long)]
+    library: Option<PathBuf>,
+}
+
+impl SourceArgs {
+    /// Applies the flags to `config`; a model file implies the neural source and a library
+    /// the retrieval source unless a source is named.
+    fn apply(&self, config: &mut Config) {
+        let implied = match (&self.model, &self.library) {
+            (Some(_), None) => Some(SourceKind::Neural),
+            (None, Some(_)) => Some(SourceKind::Retrieval),
+            _ => None,
+        };
+        if let Some(k) = self.source.or(implied) {
+            config.dancer.source = k.name().into();
+            if self.source.is_some() || implied.is_some() {
+                // Files of the other source from the configuration no longer apply.
+                match k {
+                    SourceKind::Neural => config.dancer.library = None,
+                    SourceKind::Retrieval => config.dancer.model = None,
+                }
+            }
+        }
+        if self.model.is_some() {
+            config.dancer.model = self.model.clone();
+        }
+        if self.library.is_some() {
+            config.dancer.library = self.library.clone();
+        }
+    }
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -379,9 +434,19 @@ fn main() -> Result<()> {
             data,
             library,
             full_library,
+            model,
+            quick,
             seed,
             jobs,
-        } => eval(&data, library.as_deref(), full_library, seed, jobs),
+        } => eval(&EvalOptions {
+            data: &data,
+            library: library.as_deref(),
+            model: model.as_deref(),
+            full_library,
+            quick,
+            seed,
+            jobs,
+        }),
         Command::Library {
             what:
                 LibraryCommand::Build {
@@ -399,8 +464,10 @@ fn main() -> Result<()> {
             duration,
             rate,
             stats_json,
+            dancer,
         } => {
             let mut config = Config::default();
+            dancer.apply(&mut config);
             config.audio.duration = duration;
             config.stats_json = stats_json;
             if let Some(r) = rate {
@@ -429,9 +496,11 @@ fn main() -> Result<()> {
                     seconds,
                     rate,
                     stats_json,
+                    dancer,
                 },
         } => {
             let mut config = Config::default();
+            dancer.apply(&mut config);
             config.audio.duration = Some(seconds);
             config.audio.looped = true;
             config.output.rate_hz = rate;
@@ -503,6 +572,7 @@ fn run(args: RunArgs) -> Result<()> {
     if args.midi_map.is_some() {
         config.control.midi_map = args.midi_map;
     }
+    args.dancer.apply(&mut config);
     config.validate("command line")?;
     let audio = match (&config.audio.input, &config.audio.device) {
         (Some(i), _) => AudioSource::File(i.clone()),
@@ -931,15 +1001,22 @@ fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> 
     Ok(())
 }
 
-fn eval(
-    data: &std::path::Path,
-    library: Option<&std::path::Path>,
+/// What `danced eval` scores.
+struct EvalOptions<'a> {
+    data: &'a std::path::Path,
+    library: Option<&'a std::path::Path>,
+    model: Option<&'a std::path::Path>,
     full_library: bool,
+    quick: bool,
     seed: u64,
     jobs: usize,
-) -> Result<()> {
+}
+
+fn eval(o: &EvalOptions<'_>) -> Result<()> {
+    use daemon::eval::{KEY_HORIZONS_S, LONG_RUN_S};
+    use model::source::MotionSource;
     let started = Instant::now();
-    let set = daemon::eval::EvalSet::load(data, jobs)?;
+    let set = daemon::eval::EvalSet::load(o.data, o.jobs)?;
     eprintln!(
         "validation dances: {} (loaded in {:.1} s)",
         set.validation_names().join(" "),
@@ -947,23 +1024,109 @@ fn eval(
     );
     let gt = set.ground_truth();
     let mut rows = vec![set.score("ground truth", &gt)?];
-    let mut libraries = vec![("retrieval", daemon::dancer::load_library(library)?.0)];
-    if full_library {
+    let mut libraries = vec![("retrieval", daemon::dancer::load_library(o.library)?.0)];
+    if o.full_library {
         libraries.push((
             "retrieval, full library",
-            daemon::dancer::training_library(data, jobs)?.0,
+            daemon::dancer::training_library(o.data, o.jobs)?.0,
         ));
     }
+    let temperatures = [0.0f32, 0.5, 1.0];
+    let mut sources: Vec<(String, Box<dyn MotionSource>)> = Vec::new();
     for (name, lib) in libraries {
-        let mut dancer = daemon::eval::retrieval(lib)?;
-        for t in [0.0f32, 0.5, 1.0] {
-            let (motions, us) = set.generate(&mut dancer, t, seed);
+        sources.push((name.to_string(), Box::new(daemon::eval::retrieval(lib)?)));
+    }
+    let model = daemon::dancer::load_model(o.model)?;
+    sources.push((
+        "neural".into(),
+        Box::new(daemon::dancer::neural_dancer(&model, o.seed)?),
+    ));
+    for (name, dancer) in sources.iter_mut() {
+        for t in temperatures {
+            let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);
             let label = format!("{name} T={t}");
             eprintln!("{label}: {us:.1} µs per frame");
             rows.push(set.score(&label, &motions)?);
         }
     }
     print!("{}", daemon::eval::table(&rows));
+    if o.quick {
+        eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+        return Ok(());
+    }
+    // Key poses: mean joint error at the target frame against the transition length.
+    let bank: Vec<_> = daemon::pose_bank::PoseBank::shipped()?
+        .poses()
+        .iter()
+        .map(|p| p.rotations)
+        .collect();
+    let mut key_table =
+        String::from("\n| system | key-pose error cm at the target frame, announced");
+    for h in KEY_HORIZONS_S {
+        key_table += &format!(" | {h} s ahead");
+    }
+    key_table += " | cues |\n| --- |";
+    key_table += &" --- |".repeat(KEY_HORIZONS_S.len() + 1);
+    key_table += "\n";
+    let mut unaided = daemon::dancer::neural_dancer(&model, o.seed)?;
+    unaided.set_key_blend_frames(0);
+    let mut key_sources: Vec<(String, &mut dyn MotionSource)> = sources
+        .iter_mut()
+        .filter(|(n, _)| !n.contains("full"))
+        .map(|(n, d)| (n.clone(), d.as_mut() as &mut dyn MotionSource))
+        .collect();
+    key_sources.push(("neural without the final blend".into(), &mut unaided));
+    for (name, dancer) in key_sources {
+        for t in [0.0f32, 0.5] {
+            key_table += &format!("| {name} T={t} |");
+            let mut cues = 0;
+            for h in KEY_HORIZONS_S {
+                let (e, n) = set.key_pose_error(&mut *dancer, t, o.seed, &bank, h);
+                key_table += &format!(" {e:.2} |");
+                cues = n;
+            }
+            key_table += &format!(" {cues} |\n");
+        }
+    }
+    print!("{key_table}");
+    // Long runs: no freeze over five minutes on any song.
+    println!(
+        "\n| system | freezes in {:.0} min on each validation song (looped) | songs with a freeze |\n| --- | --- | --- |",
+        LONG_RUN_S / 60.0
+    );
+    for (name, dancer) in sources.iter_mut().filter(|(n, _)| !n.contains("full")) {
+        for t in temperatures {
+            let r = set.long_run_freezes(dancer.as_mut(), t, o.seed)?;
+            println!(
+                "| {name} T={t} | {} | {} of {} |",
+                r.freezes,
+                r.songs_with_freezes,
+                set.validation_names().len()
+            );
+        }
+    }
+    // Songs in no training dance, with exact beats: the music-side metrics only.
+    match daemon::eval::MusicSet::load(o.data) {
+        Ok(music) => {
+            let mut music_rows = Vec::new();
+            for (name, dancer) in sources.iter_mut().filter(|(n, _)| !n.contains("full")) {
+                for t in temperatures {
+                    music_rows.push(music.score(
+                        &format!("{name} T={t}"),
+                        dancer.as_mut(),
+                        t,
+                        o.seed,
+                    )?);
+                }
+            }
+            println!(
+                "\nsynth-beats ({} songs in no training dance, exact beats):",
+                music_rows.first().map_or(0, |r| r.songs)
+            );
+            print!("{}", daemon::eval::music_table(&music_rows));
+        }
+        Err(e) => eprintln!("synth-beats skipped: {e:#}"),
+    }
     eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
     Ok(())
 }
@@ -1018,66 +1181,103 @@ fn generate(args: &GenerateArgs) -> Result<()> {
     let GenerateArgs {
         audio,
         out,
-        source,
+        dancer: source_args,
         seconds,
         temperature,
         seed,
-        library,
         data,
         key_poses,
         poses: bank_path,
         keypose_lead,
+        seed_pose,
     } = args;
     let (seconds, temperature, seed) = (*seconds, *temperature, *seed);
     let fps = model::retrieval::RETRIEVAL_FPS;
+    let needs_bank = !key_poses.is_empty() || seed_pose.is_some();
+    let bank = match (needs_bank, bank_path) {
+        (false, _) => daemon::pose_bank::PoseBank::default(),
+        (true, Some(p)) => daemon::pose_bank::PoseBank::load(p)?,
+        (true, None) => daemon::pose_bank::PoseBank::shipped()?,
+    };
+    let bank_pose = |name: &str| -> Result<&daemon::pose_bank::NamedPose> {
+        bank.get(name).with_context(|| {
+            let names: Vec<&str> = bank.poses().iter().map(|p| p.name.as_str()).collect();
+            format!(
+                "key pose {name:?} is not in the bank (it has {})",
+                names.join(", ")
+            )
+        })
+    };
     let mut cues = Vec::new();
-    if !key_poses.is_empty() {
-        let bank = match bank_path {
-            Some(p) => daemon::pose_bank::PoseBank::load(p)?,
-            None => daemon::pose_bank::PoseBank::shipped()?,
-        };
-        for spec in key_poses {
-            let (name, at) = daemon::key_cue::parse_cue_spec(spec)?;
-            let Some(pose) = bank.get(&name) else {
-                let names: Vec<&str> = bank.poses().iter().map(|p| p.name.as_str()).collect();
-                bail!(
-                    "key pose {name:?} is not in the bank (it has {})",
-                    names.join(", ")
-                );
-            };
-            cues.push(daemon::key_cue::KeyCue {
-                name,
-                rotations: pose.rotations,
-                frame: (at * fps).round() as usize,
-            });
-        }
+    for spec in key_poses {
+        let (name, at) = daemon::key_cue::parse_cue_spec(spec)?;
+        let rotations = bank_pose(&name)?.rotations;
+        cues.push(daemon::key_cue::KeyCue {
+            name,
+            rotations,
+            frame: (at * fps).round() as usize,
+        });
     }
     let lead_frames = (keypose_lead.max(0.0) * fps).round() as usize;
-    if source != "retrieval" {
-        bail!("unknown motion source {source:?} (available: retrieval)");
+    let mut config = Config::default();
+    source_args.apply(&mut config);
+    let kind = if data.is_some() {
+        SourceKind::Retrieval
+    } else {
+        SourceKind::parse(&config.dancer.source).unwrap_or(SourceKind::DEFAULT)
+    };
+    if seed_pose.is_some() && kind != SourceKind::Neural {
+        bail!("--seed-pose is for the neural source");
     }
     let started = Instant::now();
-    let library = match data {
+    let mut dancer: Box<dyn MotionSource> = match (kind, data) {
         // The full library, cut from the training split now (slow, needs ../shared).
-        Some(data) => daemon::dancer::training_library(data, 2)?.0,
-        None => daemon::dancer::load_library(library.as_deref())?.0,
+        (SourceKind::Retrieval, Some(data)) => Box::new(
+            model::retrieval::RetrievalDancer::new(
+                daemon::dancer::training_library(data, 2)?.0,
+                seed,
+            )
+            .context("starting the retrieval dancer")?,
+        ),
+        (SourceKind::Neural, _) if seed_pose.is_some() => {
+            let model = daemon::dancer::load_model(config.dancer.model.as_deref())?;
+            let mut d = daemon::dancer::neural_dancer(&model, seed)?;
+            if let Some(name) = seed_pose {
+                d.set_seed_pose(&daemon::dancer::standing_features(
+                    &bank_pose(name)?.rotations,
+                ));
+                d.reset(seed);
+            }
+            Box::new(d)
+        }
+        _ => daemon::dancer::open_source(
+            kind,
+            &SourceFiles {
+                model: config.dancer.model.as_deref(),
+                library: config.dancer.library.as_deref(),
+            },
+            seed,
+        )?,
     };
-    let mut dancer = model::retrieval::RetrievalDancer::new(library, seed)
-        .context("starting the retrieval dancer")?;
-    let library_s = started.elapsed().as_secs_f64();
+    let load_s = started.elapsed().as_secs_f64();
     let opts = AnalyzeOptions::native(Some(dancer.frame_rate()));
     let a = analyze_file(audio, opts, &mut |_, _| {})
         .with_context(|| format!("analysing {}", audio.display()))?;
     let limit = seconds.map_or(usize::MAX, |s| (s * dancer.frame_rate()) as usize);
+    let music: Vec<[f32; dsp::feature::FEATURE_DIM]> =
+        a.features.iter().map(|f| f.values).collect();
+    let look = dancer.lookahead_frames();
     let mut pose = model::rig::Pose::rest();
-    let mut poses = Vec::with_capacity(a.features.len().min(limit));
+    let mut poses = Vec::with_capacity(music.len().min(limit));
     let step_start = Instant::now();
-    for (i, f) in a.features.iter().take(limit).enumerate() {
+    for i in 0..music.len().min(limit) {
         let controls = Controls {
             temperature,
             key_pose: daemon::key_cue::target_at(&cues, i, lead_frames),
         };
-        dancer.step(std::slice::from_ref(&f.values), &controls, &mut pose);
+        // The frame and its look-ahead, as the live pipeline hands them over (shorter at the end).
+        let window = &music[i..(i + look + 1).min(music.len())];
+        dancer.step(window, &controls, &mut pose);
         poses.push(pose);
     }
     let step_s = step_start.elapsed().as_secs_f64();
@@ -1097,14 +1297,14 @@ fn generate(args: &GenerateArgs) -> Result<()> {
         .write(out)
         .with_context(|| format!("writing {}", out.display()))?;
     println!(
-        "{}: {} frames ({:.1} s) at {} fps from {} clips → {} (library {:.1} s, {:.1} µs per frame)",
+        "{}: {} frames ({:.1} s) at {} fps by the {} dancer → {} (loaded in {:.1} s, {:.1} µs per frame)",
         audio.display(),
         poses.len(),
         poses.len() as f64 / dancer.frame_rate(),
         dancer.frame_rate(),
-        dancer.library().clips.len(),
+        kind.name(),
         out.display(),
-        library_s,
+        load_s,
         1e6 * step_s / poses.len().max(1) as f64
     );
     Ok(())

@@ -40,11 +40,21 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Sequences per batch.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 8)]
     pub batch: usize,
+    /// Tokens per training sequence (longer than the 64-token attention window, so most
+    /// positions train the full sliding window the live dancer always has).
+    #[arg(long, default_value_t = 128)]
+    pub sequence: usize,
     /// Peak learning rate.
     #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
+    /// Noise on the previous pose in training tokens, in standard deviations.
+    #[arg(long, default_value_t = model::neural::train::INPUT_NOISE)]
+    pub input_noise: f32,
+    /// Fraction of sequences trained with the music hidden (so key poses carry information).
+    #[arg(long, default_value_t = 0.3)]
+    pub music_drop: f64,
     /// Fraction of sequences trained without a key pose.
     #[arg(long, default_value_t = 0.3)]
     pub key_drop: f64,
@@ -115,6 +125,15 @@ fn pairs(dances: &[BuiltDance], validation: bool) -> Vec<DancePair<'_>> {
         .collect()
 }
 
+/// The dances with their motion re-posed on the default rig (see
+/// [`BuiltDance::motion_on_default_rig`]).
+fn on_default_rig(mut dances: Vec<BuiltDance>) -> Vec<BuiltDance> {
+    for d in &mut dances {
+        d.motion = d.motion_on_default_rig();
+    }
+    dances
+}
+
 /// Warm-up, then cosine decay to a tenth of the peak over the time budget.
 fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
     let warm = ((step + 1) as f64 / 200.0).min(1.0);
@@ -125,8 +144,13 @@ fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
 /// `danced train`.
 pub fn train(args: &TrainArgs) -> Result<()> {
     let started_loading = Instant::now();
-    let dances = load_dances(&args.data, args.jobs)?;
+    let dances = on_default_rig(load_dances(&args.data, args.jobs)?);
     let train_pairs = pairs(&dances, false);
+    let train_names: Vec<String> = dances
+        .iter()
+        .filter(|d| !d.validation)
+        .map(|d| d.name.clone())
+        .collect();
     let val_pairs = pairs(&dances, true);
     let (mut model, fresh) = match &args.resume {
         Some(path) => (
@@ -153,23 +177,41 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 .flat_map(|p| p.1.iter().copied())
                 .collect();
             m.set_normalizer(&Normalizer::fit(&motion, &music));
-            // The seed pose: a real frame (the first of the first training dance's second second).
-            let seed = train_pairs[0].0.get(25).unwrap_or(&train_pairs[0].0[0]);
-            m.tensors
-                .insert("seed.pose", &[MOTION_FEATURE_DIM], seed.to_vec());
             (m, true)
         }
     };
     let config = model.config;
     let norm = model.normalizer()?;
-    let corpus = Corpus::new(&train_pairs, &norm, &config);
-    let val_corpus = Corpus::new(&val_pairs, &norm, &config);
+    let mut corpus = Corpus::new(&train_pairs, &norm, &config, args.sequence);
+    corpus.set_input_noise(args.input_noise);
+    corpus.set_music_drop(args.music_drop);
+    let val_corpus = Corpus::new(&val_pairs, &norm, &config, args.sequence);
     if corpus.dances() == 0 {
         bail!(
             "no training dance is long enough for a {}-frame sequence",
-            config.window
+            args.sequence
         );
     }
+    // The seed clip: the training data's most typical window (chosen afresh when resuming,
+    // so a model's seed always follows the current rule).
+    let (seed_dance, seed_start) = corpus
+        .typical_seed()
+        .context("no training dance is longer than one window")?;
+    let (motion, music) = corpus
+        .seed_clip(&norm, seed_dance, seed_start)
+        .context("no training dance is longer than one window")?;
+    model.set_seed_clip(motion, music);
+    let all_training_frames: Vec<_> = train_pairs
+        .iter()
+        .flat_map(|p| p.0.iter().copied())
+        .collect();
+    model.set_pose_range(&all_training_frames);
+    eprintln!(
+        "seed clip: training dance {} ({}), frames {seed_start}..{}",
+        seed_dance,
+        train_names.get(seed_dance).map_or("?", |s| s.as_str()),
+        seed_start + config.window
+    );
     let val: Vec<Batch> = val_corpus.all_sequences().into_iter().take(32).collect();
     eprintln!(
         "data: {} training dances ({} frames), {} validation dances ({} frames, {} sequences scored), loaded in {:.0} s",
@@ -184,12 +226,17 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     model.training.dances = corpus.dances();
     model.training.frames = corpus.frames();
     model.training.seed = args.seed;
+    model.training.data = format!(
+        "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig: {}",
+        crate::dataset::DATASET_VERSION,
+        train_names.join(" ")
+    );
     let mut trainer = Trainer::new(model)?;
     let mut rng = Rng::new(args.seed.wrapping_add(previous.steps));
     if fresh {
         trainer.data_init(&corpus.random_batch(&mut rng, 64, args.key_drop));
     }
-    let frames_per_step = args.batch * config.window;
+    let frames_per_step = args.batch * args.sequence;
     let steps_per_epoch = (corpus.frames() / frames_per_step).max(1) as u64;
     let budget = Duration::from_secs_f64(args.minutes.max(0.0) * 60.0);
     let pb = ProgressBar::new(budget.as_secs());

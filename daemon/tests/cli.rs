@@ -184,6 +184,83 @@ fn generate_dances_to_a_song_and_writes_bvh() {
 }
 
 #[test]
+fn train_writes_a_model_that_generate_and_bench_use() {
+    let Some(data) = shared_data("tang2018") else {
+        return;
+    };
+    let dir = scratch("train");
+    let model = dir.join("tiny.dnn");
+    let run = danced()
+        .args([
+            "train",
+            "--tiny",
+            "--max-steps",
+            "3",
+            "--sequence",
+            "16",
+            "--jobs",
+            "2",
+        ])
+        .arg("--data")
+        .arg(&data)
+        .arg("--out")
+        .arg(&model)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("trained 3 steps"), "{stdout}");
+    assert!(stderr.contains("seed clip: training dance"), "{stderr}");
+    // The model file drives generate (through the streaming sampler) and the bench.
+    let out = dir.join("gen.bvh");
+    let run = danced()
+        .arg("generate")
+        .arg("--audio")
+        .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
+        .args(["--seconds", "4", "--keypose", "pose-2@3"])
+        .arg("--model")
+        .arg(&model)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("by the neural dancer"), "{stdout}");
+    assert!(stdout.contains("key pose pose-2 at 3.00 s"), "{stdout}");
+    let bvh = model::bvh::Bvh::read(&out).unwrap();
+    assert_eq!(bvh.frames.len(), 100);
+    assert!(bvh.frames.iter().flatten().all(|v| v.is_finite()));
+    let run = danced()
+        .args(["bench", "model", "--frames", "50", "--model"])
+        .arg(&model)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{stdout}");
+    assert!(stdout.contains("p99"), "{stdout}");
+    // A model file is for the neural source only.
+    let run = danced()
+        .arg("generate")
+        .arg("--audio")
+        .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
+        .args(["--source", "retrieval", "--model"])
+        .arg(&model)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("neural source"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn live_run_on_a_file_writes_stats_and_a_bad_config_names_the_key() {
     let dir = scratch("live");
     let wav = dir.join("clicks.wav");

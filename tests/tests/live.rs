@@ -27,28 +27,7 @@ const FPS: f64 = 25.0;
 
 /// Stereo clicks (short decaying noise bursts with a low thump) every beat.
 fn click_track(seconds: f64) -> ReplayAudio {
-    let n = (seconds * f64::from(RATE)) as usize;
-    let mut samples = vec![0.0f32; n * 2];
-    let period = 60.0 / BPM;
-    let mut seed = 12345u64;
-    let mut t = FIRST_CLICK_S;
-    while t < seconds {
-        let start = (t * f64::from(RATE)) as usize;
-        for i in 0..(0.05 * f64::from(RATE)) as usize {
-            let Some(frame) = samples.get_mut((start + i) * 2..(start + i) * 2 + 2) else {
-                break;
-            };
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
-            let noise = ((seed >> 33) as f64 / (1u64 << 31) as f64) - 1.0;
-            let x = i as f64 / f64::from(RATE);
-            let v = (0.6 * noise * (-x * 120.0).exp()
-                + 0.8 * (std::f64::consts::TAU * 80.0 * x).sin() * (-x * 30.0).exp())
-                as f32;
-            frame[0] = v;
-            frame[1] = v;
-        }
-        t += period;
-    }
+    let (samples, _) = daemon::demo_track::click_track(seconds, BPM, FIRST_CLICK_S, RATE);
     ReplayAudio {
         samples,
         sample_rate: RATE,

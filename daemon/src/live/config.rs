@@ -198,8 +198,12 @@ impl Default for ControlConfig {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct DancerConfig {
-    /// Motion source (`retrieval`).
+    /// Motion source (`neural` or `retrieval`).
     pub source: String,
+    /// Neural model file (default: the built-in one).
+    pub model: Option<PathBuf>,
+    /// Clip library file of the retrieval source (default: the built-in one).
+    pub library: Option<PathBuf>,
     /// Initial temperature (0 = most likely motion).
     pub temperature: f32,
     /// Random seed.
@@ -211,7 +215,9 @@ pub struct DancerConfig {
 impl Default for DancerConfig {
     fn default() -> Self {
         Self {
-            source: "retrieval".into(),
+            source: crate::dancer::SourceKind::DEFAULT.name().into(),
+            model: None,
+            library: None,
             temperature: 0.5,
             seed: 1,
             transition_beats: 1.0,
@@ -283,11 +289,30 @@ impl Config {
                 format!("= {b}: must be in 0..=64"),
             ));
         }
-        if self.dancer.source != "retrieval" {
-            return Err(bad(
-                "dancer.source",
-                format!("= {:?}: available: retrieval", self.dancer.source),
-            ));
+        match crate::dancer::SourceKind::parse(&self.dancer.source) {
+            None => {
+                return Err(bad(
+                    "dancer.source",
+                    format!(
+                        "= {:?}: available: {}",
+                        self.dancer.source,
+                        crate::dancer::SourceKind::NAMES
+                    ),
+                ));
+            }
+            Some(crate::dancer::SourceKind::Neural) if self.dancer.library.is_some() => {
+                return Err(bad(
+                    "dancer.library",
+                    "is for the retrieval source; dancer.source is \"neural\"".into(),
+                ));
+            }
+            Some(crate::dancer::SourceKind::Retrieval) if self.dancer.model.is_some() => {
+                return Err(bad(
+                    "dancer.model",
+                    "is for the neural source; dancer.source is \"retrieval\"".into(),
+                ));
+            }
+            Some(_) => {}
         }
         for (n, bone) in &self.output.vrchat.trackers {
             let ok_n = n.parse::<u8>().is_ok_and(|n| (1..=8).contains(&n));
@@ -342,5 +367,24 @@ mod tests {
         let e =
             Config::parse("[dancer]\ntemperature = \"hot\"\n", Path::new("x.toml")).unwrap_err();
         assert!(e.to_string().contains("temperature"), "{e}");
+    }
+
+    #[test]
+    fn dancer_source_and_its_files_are_checked() {
+        let c = Config::parse(
+            "[dancer]\nsource = \"neural\"\nmodel = \"m.dnn\"\n",
+            Path::new("x.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.dancer.source, "neural");
+        assert_eq!(c.dancer.model.as_deref(), Some(Path::new("m.dnn")));
+        let e = Config::parse("[dancer]\nsource = \"puppet\"\n", Path::new("x.toml")).unwrap_err();
+        assert!(e.to_string().contains("neural, retrieval"), "{e}");
+        let e = Config::parse(
+            "[dancer]\nsource = \"retrieval\"\nmodel = \"m.dnn\"\n",
+            Path::new("x.toml"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("dancer.model"), "{e}");
     }
 }

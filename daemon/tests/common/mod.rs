@@ -47,31 +47,7 @@ pub fn write_wav(path: &Path, samples: &[f32], rate: u32, channels: u16) {
     std::fs::write(path, b).unwrap();
 }
 
-/// Stereo clicks (decaying noise burst plus a low thump) every beat from `first_s`; returns the
-/// samples at `rate` and the click times.
+/// Stereo clicks every beat from `first_s` (see [`daemon::demo_track::click_track`]).
 pub fn click_track(seconds: f64, bpm: f64, first_s: f64, rate: u32) -> (Vec<f32>, Vec<f64>) {
-    let n = (seconds * f64::from(rate)) as usize;
-    let mut samples = vec![0.0f32; n * 2];
-    let mut seed = 12345u64;
-    let mut beats = Vec::new();
-    let mut t = first_s;
-    while t < seconds {
-        beats.push(t);
-        let start = (t * f64::from(rate)) as usize;
-        for i in 0..(0.05 * f64::from(rate)) as usize {
-            let Some(frame) = samples.get_mut((start + i) * 2..(start + i) * 2 + 2) else {
-                break;
-            };
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
-            let noise = ((seed >> 33) as f64 / (1u64 << 31) as f64) - 1.0;
-            let x = i as f64 / f64::from(rate);
-            let v = (0.6 * noise * (-x * 120.0).exp()
-                + 0.8 * (std::f64::consts::TAU * 80.0 * x).sin() * (-x * 30.0).exp())
-                as f32;
-            frame[0] = v;
-            frame[1] = v;
-        }
-        t += 60.0 / bpm;
-    }
-    (samples, beats)
+    daemon::demo_track::click_track(seconds, bpm, first_s, rate)
 }

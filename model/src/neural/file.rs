@@ -20,9 +20,17 @@ use dsp::feature::{FEATURE_DIM, FEATURE_LAYOUT_VERSION};
 /// First bytes of every model file.
 pub const MAGIC: &[u8; 8] = b"DANCEDNN";
 /// Version of this file layout; bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// Frames per second every model here runs at.
 pub const FRAME_RATE: f64 = 25.0;
+/// Name of the lowest value of every pose feature in the training data.
+pub const POSE_MIN: &str = "range.pose_min";
+/// Name of the highest value of every pose feature in the training data.
+pub const POSE_MAX: &str = "range.pose_max";
+/// Name of the seed clip's motion tensor.
+pub const SEED_MOTION: &str = "seed.motion";
+/// Name of the seed clip's music tensor.
+pub const SEED_MUSIC: &str = "seed.music";
 
 /// What went wrong reading or writing a model file.
 #[derive(Debug, Error)]
@@ -73,6 +81,9 @@ pub struct TrainingSummary {
     pub seed: u64,
     /// Last validation NLL, nats per frame (normalised features), if measured.
     pub validation_nll: Option<f64>,
+    /// What the model was trained on (data set, split, dances), and under which terms.
+    #[serde(default)]
+    pub data: String,
 }
 
 /// The metadata block.
@@ -107,7 +118,7 @@ pub struct ModelMeta {
 pub struct NeuralModel {
     /// Network sizes.
     pub config: NetConfig,
-    /// All weights, including `norm.*` and `seed.pose`.
+    /// All weights, including `norm.*` and the seed clip `seed.*`.
     pub tensors: NamedTensors,
     /// Training record.
     pub training: TrainingSummary,
@@ -129,6 +140,53 @@ fn crc32(bytes: &[u8]) -> u32 {
 }
 
 impl NeuralModel {
+    /// The seed clip ("motion prompt"): raw motion features of `window` frames and, row for
+    /// row, the raw music frame each of them was heard with `lookahead` frames earlier (the
+    /// music their token carries).
+    pub fn seed_clip(&self) -> Result<(&[f32], &[f32]), WeightError> {
+        let n = self.config.window;
+        Ok((
+            self.tensors.get(SEED_MOTION, &[n, MOTION_FEATURE_DIM])?,
+            self.tensors
+                .get(SEED_MUSIC, &[n, dsp::feature::FEATURE_DIM])?,
+        ))
+    }
+
+    /// The range of every raw pose feature in the training data (lowest, highest).
+    pub fn pose_range(&self) -> Result<(&[f32], &[f32]), WeightError> {
+        Ok((
+            self.tensors.get(POSE_MIN, &[MOTION_FEATURE_DIM])?,
+            self.tensors.get(POSE_MAX, &[MOTION_FEATURE_DIM])?,
+        ))
+    }
+
+    /// Stores the training data's pose range from its frames.
+    pub fn set_pose_range(&mut self, frames: &[[f32; MOTION_FEATURE_DIM]]) {
+        let mut lo = vec![f32::INFINITY; MOTION_FEATURE_DIM];
+        let mut hi = vec![f32::NEG_INFINITY; MOTION_FEATURE_DIM];
+        for f in frames {
+            for i in 0..MOTION_FEATURE_DIM {
+                lo[i] = lo[i].min(f[i]);
+                hi[i] = hi[i].max(f[i]);
+            }
+        }
+        if frames.is_empty() {
+            lo.fill(-1e6);
+            hi.fill(1e6);
+        }
+        self.tensors.insert(POSE_MIN, &[MOTION_FEATURE_DIM], lo);
+        self.tensors.insert(POSE_MAX, &[MOTION_FEATURE_DIM], hi);
+    }
+
+    /// Stores the seed clip (see [`NeuralModel::seed_clip`]).
+    pub fn set_seed_clip(&mut self, motion: Vec<f32>, music: Vec<f32>) {
+        let n = self.config.window;
+        self.tensors
+            .insert(SEED_MOTION, &[n, MOTION_FEATURE_DIM], motion);
+        self.tensors
+            .insert(SEED_MUSIC, &[n, dsp::feature::FEATURE_DIM], music);
+    }
+
     /// Normalisation statistics stored in the weights.
     pub fn normalizer(&self) -> Result<Normalizer, WeightError> {
         let t = &self.tensors;
@@ -279,16 +337,32 @@ impl NeuralModel {
                 },
             );
         }
-        let model = NeuralModel {
+        let mut model = NeuralModel {
             config: meta.config,
             tensors,
             training: meta.training,
         };
+        if model.tensors.get(POSE_MIN, &[MOTION_FEATURE_DIM]).is_err()
+            && model.tensors.get(POSE_MAX, &[MOTION_FEATURE_DIM]).is_err()
+        {
+            // Checkpoints written before the range was stored: no clamp until retrained.
+            model.set_pose_range(&[]);
+        }
         // Building the runtime checks every tensor the network needs (names, shapes, finite,
         // invertible flow maps).
         crate::neural::runtime::Runtime::new(&model.tensors, &model.config)?;
         model.normalizer()?;
-        model.tensors.get("seed.pose", &[MOTION_FEATURE_DIM])?;
+        model.seed_clip()?;
+        let (lo, hi) = model.pose_range()?;
+        if lo
+            .iter()
+            .zip(hi)
+            .any(|(l, h)| l.partial_cmp(h).is_none_or(|o| o.is_gt()))
+        {
+            return Err(ModelFileError::Metadata(
+                "pose range: a lowest value above its highest".into(),
+            ));
+        }
         Ok(model)
     }
 

@@ -26,7 +26,12 @@ pub fn cpu_device() -> burn::tensor::Device {
     burn::tensor::Device::flex()
 }
 
-/// The same device with gradients enabled, for training.
+/// The device training runs on, with gradients enabled: the CPU, or with the `wgpu` feature
+/// the default GPU adapter.
 pub fn training_device() -> burn::tensor::Device {
-    cpu_device().autodiff()
+    #[cfg(feature = "wgpu")]
+    let device = burn::tensor::Device::wgpu(burn::tensor::DeviceKind::DefaultDevice);
+    #[cfg(not(feature = "wgpu"))]
+    let device = cpu_device();
+    device.autodiff()
 }

@@ -180,7 +180,18 @@ pub fn init_net(c: &NetConfig, seed: u64) -> NamedTensors {
     t.insert("norm.pose_std", &[P], vec![1.0; P]);
     t.insert("norm.music_mean", &[M], vec![0.0; M]);
     t.insert("norm.music_std", &[M], vec![1.0; M]);
-    t.insert("seed.pose", &[P], vec![0.0; P]);
+    t.insert(crate::neural::file::POSE_MIN, &[P], vec![-1e6; P]);
+    t.insert(crate::neural::file::POSE_MAX, &[P], vec![1e6; P]);
+    t.insert(
+        crate::neural::file::SEED_MOTION,
+        &[c.window, P],
+        vec![0.0; c.window * P],
+    );
+    t.insert(
+        crate::neural::file::SEED_MUSIC,
+        &[c.window, M],
+        vec![0.0; c.window * M],
+    );
     let d = c.d_model;
     dense(&mut t, &mut rng, "embed", c.token_dim(), d, false);
     t.insert("embed.none", &[d], vec![0.0; d]);

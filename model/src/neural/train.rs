@@ -26,6 +26,14 @@ pub const KEY_HORIZON_MAX: usize = 100;
 /// dimension drives its density to infinity; the noise bounds it (validation is noise-free).
 pub const TARGET_NOISE: f32 = 0.03;
 
+/// Default standard deviation of the Gaussian noise added to the previous pose in training
+/// tokens (normalised units): live, the model reads its own samples, never the clean capture,
+/// and a model that has only seen clean inputs drifts once its own errors feed back.
+pub const INPUT_NOISE: f32 = 0.1;
+
+/// The mean music frame, normalised: what a dropped-music token carries.
+static ZERO_MUSIC: [f32; M] = [0.0; M];
+
 /// One normalised dance.
 #[derive(Clone, Debug)]
 struct Dance {
@@ -39,6 +47,9 @@ struct Dance {
 pub struct Corpus {
     dances: Vec<Dance>,
     config: NetConfig,
+    sequence: usize,
+    input_noise: f32,
+    music_drop: f64,
 }
 
 /// A batch of sequences: tokens `[b, window, TOKEN_DIM]` and targets `[b, window, P]`, flat.
@@ -53,14 +64,18 @@ pub struct Batch {
 }
 
 impl Corpus {
-    /// Normalises the dances (motion and its aligned music, frame for frame); dances too short
-    /// for one sequence are skipped.
+    /// Normalises the dances (motion and its aligned music, frame for frame) for sequences of
+    /// `sequence` tokens; dances too short for one sequence are skipped. Sequences longer than
+    /// the attention window train the sliding-window regime the live dancer runs in (every
+    /// token past the first window sees a full window).
     pub fn new(
         dances: &[(&[MotionFeatures], &[[f32; M]])],
         norm: &Normalizer,
         config: &NetConfig,
+        sequence: usize,
     ) -> Self {
-        let need = config.window + config.lookahead + 1;
+        let sequence = sequence.max(1);
+        let need = sequence + config.lookahead + 1;
         let dances = dances
             .iter()
             .filter(|(m, a)| m.len().min(a.len()) >= need)
@@ -82,7 +97,22 @@ impl Corpus {
         Corpus {
             dances,
             config: *config,
+            sequence,
+            input_noise: INPUT_NOISE,
+            music_drop: 0.0,
         }
+    }
+
+    /// Sets the noise on the previous pose of training tokens (normalised units).
+    pub fn set_input_noise(&mut self, sigma: f32) {
+        self.input_noise = sigma.max(0.0);
+    }
+
+    /// Sets the fraction of training sequences whose music is hidden (the mean frame): on this
+    /// small data set the future is predictable from the music (the network memorises the
+    /// choreographies), which leaves a key pose nothing to add; without music it must use it.
+    pub fn set_music_drop(&mut self, p: f64) {
+        self.music_drop = p.clamp(0.0, 1.0);
     }
 
     /// Dances usable for sequences.
@@ -105,13 +135,21 @@ impl Corpus {
         key: Option<(usize, usize)>,
         mut noise: Option<&mut Rng>,
     ) {
+        let no_music = match noise.as_mut() {
+            Some(rng) => rng.uniform() < self.music_drop,
+            None => false,
+        };
         let d = &self.dances[dance];
-        let (s, l) = (self.config.window, self.config.lookahead);
+        let (s, l) = (self.sequence, self.config.lookahead);
         let mut tok = vec![0.0; TOKEN_DIM];
         for t in 0..s {
             let f = start + t;
             let pose = &d.motion[(f - 1) * P..f * P];
-            let music = &d.music[(f + l) * M..(f + l + 1) * M];
+            let music = if no_music {
+                &ZERO_MUSIC[..]
+            } else {
+                &d.music[(f + l) * M..(f + l + 1) * M]
+            };
             let k = key.and_then(|(at, kf)| {
                 (t >= at && f <= kf).then(|| {
                     (
@@ -121,6 +159,11 @@ impl Corpus {
                 })
             });
             token::fill(&mut tok, pose, music, k);
+            if let Some(rng) = noise.as_mut() {
+                for v in &mut tok[token::POSE_AT..token::POSE_AT + P] {
+                    *v += self.input_noise * rng.normal();
+                }
+            }
             batch.tokens.extend_from_slice(&tok);
             batch
                 .targets
@@ -138,7 +181,7 @@ impl Corpus {
     /// A random batch; each sequence has a key pose with probability `1 − key_drop`.
     pub fn random_batch(&self, rng: &mut Rng, sequences: usize, key_drop: f64) -> Batch {
         let mut batch = Batch::default();
-        let (s, l) = (self.config.window, self.config.lookahead);
+        let (s, l) = (self.sequence, self.config.lookahead);
         // Dances are drawn in proportion to their length, so every frame is equally likely.
         let total = self.frames();
         for _ in 0..sequences {
@@ -160,9 +203,63 @@ impl Corpus {
         batch
     }
 
+    /// The seed clip of dance `dance` from frame `start`, raw (see
+    /// [`NeuralModel::seed_clip`]), un-normalised with `norm`; None if it does not fit.
+    pub fn seed_clip(
+        &self,
+        norm: &Normalizer,
+        dance: usize,
+        start: usize,
+    ) -> Option<(Vec<f32>, Vec<f32>)> {
+        let d = self.dances.get(dance)?;
+        let (n, l) = (self.config.window, self.config.lookahead);
+        if start + n + l > d.frames {
+            return None;
+        }
+        let mut motion = vec![0.0; n * P];
+        let mut music = vec![0.0; n * M];
+        for i in 0..n {
+            norm.unpose(
+                &d.motion[(start + i) * P..(start + i + 1) * P],
+                &mut motion[i * P..(i + 1) * P],
+            );
+            let f = start + i + l;
+            for j in 0..M {
+                music[i * M + j] = d.music[f * M + j] * norm.music_std[j] + norm.music_mean[j];
+            }
+        }
+        Some((motion, music))
+    }
+
+    /// The most typical window to seed the dancer with: (dance, start) of the window whose
+    /// most extreme normalised pose value is smallest. A seed at the edge of the data (an arm
+    /// raised 3σ) sends the free-running model off the data's range in a few frames.
+    pub fn typical_seed(&self) -> Option<(usize, usize)> {
+        let (n, l) = (self.config.window, self.config.lookahead);
+        let mut best: Option<(f32, usize, usize)> = None;
+        for (i, d) in self.dances.iter().enumerate() {
+            let frame_max: Vec<f32> = d
+                .motion
+                .chunks_exact(P)
+                .map(|r| r.iter().fold(0.0f32, |m, v| m.max(v.abs())))
+                .collect();
+            let mut start = 0;
+            while start + n + l <= d.frames {
+                let worst = frame_max[start..start + n]
+                    .iter()
+                    .fold(0.0f32, |m, &v| m.max(v));
+                if best.is_none_or(|b| worst < b.0) {
+                    best = Some((worst, i, start));
+                }
+                start += 5;
+            }
+        }
+        best.map(|(_, i, s)| (i, s))
+    }
+
     /// Every non-overlapping sequence, without key poses, in order (the validation set).
     pub fn all_sequences(&self) -> Vec<Batch> {
-        let (s, l) = (self.config.window, self.config.lookahead);
+        let (s, l) = (self.sequence, self.config.lookahead);
         let mut out = Vec::new();
         let mut batch = Batch::default();
         for (i, d) in self.dances.iter().enumerate() {
@@ -291,7 +388,7 @@ mod tests {
             music[i][1] = ph.cos();
         }
         let norm = Normalizer::fit(&motion, &music);
-        let corpus = Corpus::new(&[(&motion[..], &music[..])], &norm, &c);
+        let corpus = Corpus::new(&[(&motion[..], &music[..])], &norm, &c, 2 * c.window);
         let mut model = NeuralModel {
             config: c,
             tensors: init_net(&c, 1),
@@ -309,5 +406,30 @@ mod tests {
         }
         let after = tr.evaluate(&val).unwrap();
         assert!(after < before - 20.0, "NLL {before} → {after}");
+    }
+
+    #[test]
+    fn typical_seed_avoids_extreme_poses() {
+        let c = NetConfig::tiny();
+        // Calm swaying, with one wild stretch early on: the seed must come from the calm part.
+        let frames = 120;
+        let mut motion = vec![[0.0f32; P]; frames];
+        let music = vec![[0.0f32; M]; frames];
+        for (i, m) in motion.iter_mut().enumerate() {
+            let wild = if (5..20).contains(&i) { 10.0 } else { 1.0 };
+            for (j, v) in m.iter_mut().enumerate() {
+                *v = wild * (i as f32 * 0.2 + j as f32).sin();
+            }
+        }
+        let norm = Normalizer::fit(&motion, &music);
+        let corpus = Corpus::new(&[(&motion[..], &music[..])], &norm, &c, 16);
+        let (dance, start) = corpus.typical_seed().unwrap();
+        assert_eq!(dance, 0);
+        assert!(start >= 20, "seed starts at {start}");
+        let (m, a) = corpus.seed_clip(&norm, dance, start).unwrap();
+        assert_eq!(m.len(), c.window * P);
+        assert_eq!(a.len(), c.window * M);
+        // The seed is raw motion: the frames themselves, not their normalised values.
+        assert!((m[0] - motion[start][0]).abs() < 1e-4);
     }
 }
