@@ -1,6 +1,8 @@
 //! The shipped dancer end to end: the built-in clip library, the streaming analysis of a song,
 //! and the motion it produces, scored with the dance metrics against the song's exact beats.
 
+mod common;
+
 use daemon::demo_track::{DEMO_BPM, DEMO_RATE, demo_track};
 use daemon::offline::{AnalyzeOptions, analyze_samples};
 use model::metrics::{FreezeParams, JointTrack, beat_align, detect_freezes};
@@ -98,15 +100,7 @@ fn temperature_widens_the_choice_and_seeds_reproduce() {
     let (c, _) = dance_to_demo(20.0, 1.0, 1);
     let (d, _) = dance_to_demo(20.0, 1.0, 2);
     let (e, _) = dance_to_demo(20.0, 1.0, 2);
-    let differ = |x: &[Pose], y: &[Pose]| {
-        x.iter()
-            .zip(y)
-            .filter(|(p, q)| {
-                (0..JOINT_COUNT)
-                    .any(|j| p.local_rotations[j].dot(q.local_rotations[j]).abs() < 0.999)
-            })
-            .count()
-    };
+    let differ = |x: &[Pose], y: &[Pose]| common::frames_differing(x, y, 0.999);
     assert_eq!(differ(&a, &b), 0, "T = 0 ignores the seed");
     assert_eq!(differ(&d, &e), 0, "a seed reproduces");
     assert!(differ(&c, &d) > 100, "T = 1 depends on the seed");

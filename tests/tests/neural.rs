@@ -1,6 +1,8 @@
 //! The shipped neural dancer end to end: the model built into danced, the streaming analysis of
 //! a song fed with the model's look-ahead, and the motion it samples.
 
+mod common;
+
 use daemon::demo_track::{DEMO_RATE, demo_track};
 use daemon::offline::{AnalyzeOptions, analyze_samples};
 use model::metrics::{FreezeParams, JointTrack, detect_freezes};
@@ -99,15 +101,7 @@ fn temperature_and_seed_shape_the_samples() {
     let (c, _) = dance_to_demo(8.0, 1.0, 1);
     let (d, _) = dance_to_demo(8.0, 1.0, 2);
     let (e, _) = dance_to_demo(8.0, 1.0, 2);
-    let differ = |x: &[Pose], y: &[Pose]| {
-        x.iter()
-            .zip(y)
-            .filter(|(p, q)| {
-                (0..JOINT_COUNT)
-                    .any(|j| p.local_rotations[j].dot(q.local_rotations[j]).abs() < 0.9999)
-            })
-            .count()
-    };
+    let differ = |x: &[Pose], y: &[Pose]| common::frames_differing(x, y, 0.9999);
     assert_eq!(
         differ(&a, &b),
         0,

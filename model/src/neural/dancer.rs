@@ -357,18 +357,23 @@ mod tests {
         for r in rotations.iter_mut().skip(1) {
             *r = target;
         }
-        let mut pose = Pose::rest();
-        let music = [[0.1f32; FEATURE_DIM]; 3];
-        for ftg in (0..=40u32).rev() {
-            let controls = Controls {
-                temperature: 0.5,
-                key_pose: Some(KeyPoseTarget {
-                    rotations,
-                    frames_to_go: ftg,
-                }),
-            };
-            d.step(&music, &controls, &mut pose);
-        }
+        // Counts down to the key pose from 40 frames; returns the pose at the deadline.
+        let arrive = |d: &mut NeuralDancer| {
+            let mut pose = Pose::rest();
+            let music = [[0.1f32; FEATURE_DIM]; 3];
+            for ftg in (0..=40u32).rev() {
+                let controls = Controls {
+                    temperature: 0.5,
+                    key_pose: Some(KeyPoseTarget {
+                        rotations,
+                        frames_to_go: ftg,
+                    }),
+                };
+                d.step(&music, &controls, &mut pose);
+            }
+            pose
+        };
+        let pose = arrive(&mut d);
         assert_eq!(d.bad_frames(), 0);
         for j in 1..22 {
             let a = pose.local_rotations[j].angle_between(target);
@@ -377,16 +382,7 @@ mod tests {
         // Without the blend the untrained network lands anywhere.
         d.set_key_blend_frames(0);
         d.reset(2);
-        for ftg in (0..=40u32).rev() {
-            let controls = Controls {
-                temperature: 0.5,
-                key_pose: Some(KeyPoseTarget {
-                    rotations,
-                    frames_to_go: ftg,
-                }),
-            };
-            d.step(&music, &controls, &mut pose);
-        }
+        let pose = arrive(&mut d);
         let worst = (1..22)
             .map(|j| pose.local_rotations[j].angle_between(target))
             .fold(0.0f32, f32::max);
