@@ -129,15 +129,12 @@ pub fn default_source(seed: u64) -> Result<Box<dyn MotionSource + Send>> {
 /// Cuts the full clip library from the training split of `data/tang2018` (fitted, aligned and
 /// featurised exactly as `danced dataset build` does); returns it with the dances used.
 pub fn training_library(data: &Path, jobs: usize) -> Result<(ClipLibrary, Vec<String>)> {
-    let dances = crate::dataset::dances_with_split(data)
-        .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-    let built = crate::dataset::build_dances(
+    let built = crate::dataset::build_all(
         data,
-        &dances,
         jobs,
         |dance, validation| !validation && dance.audio.is_some(),
-        |_| {},
-    );
+        false,
+    )?;
     let (names, pairs): (Vec<String>, Vec<_>) = built
         .into_iter()
         .filter_map(|(name, r)| {

@@ -427,6 +427,30 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
     Ok(built)
 }
 
+/// Every dance under `data/tang2018` that `wanted` accepts, built by [`build_dances`] with
+/// `jobs` threads, behind a progress bar on stderr when `bar` is set.
+pub fn build_all(
+    data: &Path,
+    jobs: usize,
+    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
+    bar: bool,
+) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
+    use anyhow::Context;
+    let dances = dances_with_split(data)
+        .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
+    let pb = if bar {
+        crate::progress::count_bar(dances.len() as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let built = build_dances(data, &dances, jobs, wanted, |name| {
+        pb.set_message(name.to_string());
+        pb.inc(1);
+    });
+    pb.finish_and_clear();
+    Ok(built)
+}
+
 /// Loads and builds ([`build_dance`]) the `dances` (as [`dances_with_split`] lists them) that
 /// `wanted` accepts (given the loaded dance and whether it is in the validation split), with
 /// `jobs` threads; `progress` hears each dance's name once it is done. One `(name, result)` per

@@ -96,10 +96,7 @@ fn window_kinetics(positions: &[glam::Vec3]) -> Vec<Vec<f64>> {
 impl EvalSet {
     /// Builds every dance under `data` (as `dataset build` does) with `jobs` threads.
     pub fn load(data: &Path, jobs: usize) -> Result<EvalSet> {
-        let dances = crate::dataset::dances_with_split(data)
-            .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-        let built =
-            crate::dataset::build_dances(data, &dances, jobs, |d, _| d.audio.is_some(), |_| {});
+        let built = crate::dataset::build_all(data, jobs, |d, _| d.audio.is_some(), false)?;
         let skeleton = Skeleton::default_adult();
         let mut set = EvalSet {
             validation: Vec::new(),

@@ -18,3 +18,4 @@ pub mod output;
 pub mod plot;
 pub mod pool;
 pub mod pose_bank;
+pub mod progress;

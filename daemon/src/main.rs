@@ -14,6 +14,7 @@ use daemon::live::config::Config;
 use daemon::live_cli::{AudioSource, RunMode, run_live, summary};
 use daemon::offline::{AnalyzeOptions, analyze_file, analyze_samples};
 use daemon::output::{beats_text, features_npy, features_sidecar, onsets_text, write_atomic};
+use daemon::progress::count_bar;
 use dsp::BeatTrackerKind;
 
 // Counts allocations in the audio callback path (see `daemon::alloc_counter`).
@@ -597,15 +598,6 @@ fn progress_bar(hidden: bool) -> ProgressBar {
 }
 
 /// A bar counting finished items, with the current one's name as its message.
-fn count_bar(len: u64) -> ProgressBar {
-    let pb = ProgressBar::new(len);
-    pb.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    pb
-}
-
 fn analyze(args: AnalyzeArgs) -> Result<()> {
     let started = Instant::now();
     let pb = progress_bar(false);
@@ -941,22 +933,8 @@ fn motion_metrics(bvh_path: &std::path::Path, audio: &std::path::Path, offset: f
 }
 
 fn dataset_build(data: &std::path::Path, out: &std::path::Path, jobs: usize) -> Result<()> {
-    let dances = daemon::dataset::dances_with_split(data)
-        .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-    let count = dances.len();
-    let pb = count_bar(count as u64);
     let started = Instant::now();
-    let results = daemon::dataset::build_dances(
-        data,
-        &dances,
-        jobs,
-        |_, _| true,
-        |name| {
-            pb.set_message(name.to_string());
-            pb.inc(1);
-        },
-    );
-    pb.finish_and_clear();
+    let results = daemon::dataset::build_all(data, jobs, |_, _| true, true)?;
     let mut built = Vec::new();
     let mut skipped = Vec::new();
     for (name, r) in results {

@@ -85,26 +85,7 @@ pub struct BenchModelArgs {
 }
 
 fn load_dances(data: &Path, jobs: usize) -> Result<Vec<BuiltDance>> {
-    let dances = crate::dataset::dances_with_split(data)
-        .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
-    let count = dances.len();
-    let pb = ProgressBar::new(count as u64);
-    pb.set_style(
-        ProgressStyle::with_template("building dances {bar:30} {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let built = crate::dataset::build_dances(
-        data,
-        &dances,
-        jobs,
-        |_, _| true,
-        |name| {
-            pb.set_message(name.to_string());
-            pb.inc(1);
-        },
-    );
-    pb.finish_and_clear();
-    let built: Vec<BuiltDance> = built
+    let built: Vec<BuiltDance> = crate::dataset::build_all(data, jobs, |_, _| true, true)?
         .into_iter()
         .filter_map(|(_, r)| r.ok())
         .filter(|d| !d.music.is_empty())
