@@ -329,9 +329,12 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
     let _ = writeln!(out, "\n{} — {}", set.name, tracker.name());
     let _ = writeln!(
         out,
-        "| file | F | CMLt | AMLt | tempo | beats | late | lag p50 ms |"
+        "| file | F | CMLt | AMLt | downbeat F | meter | tempo | beats | late | lag p50 ms |"
     );
-    let _ = writeln!(out, "| --- | --- | --- | --- | --- | --- | --- | --- |");
+    let _ = writeln!(
+        out,
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
     for s in scores {
         if let Some(e) = &s.error {
             let _ = writeln!(out, "| {} | error: {e} |", s.name);

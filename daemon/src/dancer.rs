@@ -27,7 +27,7 @@ pub enum SourceKind {
 
 impl SourceKind {
     /// The source `run`, `demo` and `generate` use when none is named.
-    pub const DEFAULT: SourceKind = SourceKind::Retrieval;
+    pub const DEFAULT: SourceKind = SourceKind::Neural;
 
     /// Every source, for messages.
     pub const NAMES: &str = "neural, retrieval";
@@ -50,9 +50,12 @@ impl SourceKind {
     }
 }
 
-/// Where a source's data comes from (`None` = the one built into danced).
+/// Where a source's data comes from (`None` = the one built into danced) and how it dances.
 #[derive(Clone, Debug, Default)]
-pub struct SourceFiles<'a> {
+pub struct SourceSettings<'a> {
+    /// Depth of the neural dancer's beat accent (`None`: its default,
+    /// [`model::neural::dancer::BEAT_ACCENT`]).
+    pub beat_accent: Option<f32>,
     /// Neural model file.
     pub model: Option<&'a Path>,
     /// Clip library file.
@@ -75,24 +78,28 @@ pub fn neural_dancer(model: &NeuralModel, seed: u64) -> Result<NeuralDancer> {
     Ok(d)
 }
 
-/// Opens the motion source `kind` from `files`, seeded with `seed`.
+/// Opens the motion source `kind` with `settings`, seeded with `seed`.
 pub fn open_source(
     kind: SourceKind,
-    files: &SourceFiles<'_>,
+    settings: &SourceSettings<'_>,
     seed: u64,
 ) -> Result<Box<dyn MotionSource + Send>> {
     Ok(match kind {
         SourceKind::Neural => {
-            if files.library.is_some() {
+            if settings.library.is_some() {
                 bail!("a clip library is for the retrieval source, not the neural one");
             }
-            Box::new(neural_dancer(&load_model(files.model)?, seed)?)
+            let mut d = neural_dancer(&load_model(settings.model)?, seed)?;
+            if let Some(a) = settings.beat_accent {
+                d.set_beat_accent(a);
+            }
+            Box::new(d)
         }
         SourceKind::Retrieval => {
-            if files.model.is_some() {
+            if settings.model.is_some() {
                 bail!("a model file is for the neural source, not the retrieval one");
             }
-            let (library, _) = load_library(files.library)?;
+            let (library, _) = load_library(settings.library)?;
             Box::new(RetrievalDancer::new(library, seed).context("starting the retrieval dancer")?)
         }
     })
@@ -119,11 +126,6 @@ pub fn load_library(path: Option<&Path>) -> Result<(ClipLibrary, String)> {
             ClipLibrary::from_bytes(&bytes).with_context(|| format!("reading {}", p.display()))
         }
     }
-}
-
-/// The default motion source on its built-in data.
-pub fn default_source(seed: u64) -> Result<Box<dyn MotionSource + Send>> {
-    open_source(SourceKind::DEFAULT, &SourceFiles::default(), seed)
 }
 
 /// Cuts the full clip library from the training split of `data/tang2018` (fitted, aligned and

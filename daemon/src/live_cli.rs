@@ -82,9 +82,10 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         .with_context(|| format!("unknown motion source {:?}", config.dancer.source))?;
     let source = crate::dancer::open_source(
         kind,
-        &crate::dancer::SourceFiles {
+        &crate::dancer::SourceSettings {
             model: config.dancer.model.as_deref(),
             library: config.dancer.library.as_deref(),
+            beat_accent: Some(config.dancer.beat_accent),
         },
         config.dancer.seed,
     )?;

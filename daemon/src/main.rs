@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tracing_subscriber::EnvFilter;
 
 use daemon::bench;
-use daemon::dancer::{SourceFiles, SourceKind};
+use daemon::dancer::{SourceKind, SourceSettings};
 use daemon::live::config::Config;
 use daemon::live_cli::{AudioSource, RunMode, run_live, summary};
 use daemon::offline::{AnalyzeOptions, analyze_file, analyze_samples};
@@ -310,6 +310,9 @@ struct SourceArgs {
     /// Clip library file of the retrieval source (default: the built-in one).
     #[arg(long)]
     library: Option<PathBuf>,
+    /// Depth of the neural dancer's beat accent, 0–0.9 (0: the network's own timing).
+    #[arg(long)]
+    beat_accent: Option<f32>,
 }
 
 impl SourceArgs {
@@ -336,6 +339,9 @@ impl SourceArgs {
         }
         if self.library.is_some() {
             config.dancer.library = self.library.clone();
+        }
+        if let Some(a) = self.beat_accent {
+            config.dancer.beat_accent = a;
         }
     }
 }
@@ -992,6 +998,8 @@ struct EvalOptions<'a> {
 
 fn eval(o: &EvalOptions<'_>) -> Result<()> {
     use daemon::eval::{KEY_HORIZONS_S, LONG_RUN_S};
+    const NO_ACCENT: &str = "neural, no beat accent";
+    const FRESH_NOISE: &str = "neural, independent noise";
     use model::source::MotionSource;
     let started = Instant::now();
     let set = daemon::eval::EvalSet::load(o.data, o.jobs)?;
@@ -1019,6 +1027,14 @@ fn eval(o: &EvalOptions<'_>) -> Result<()> {
         "neural".into(),
         Box::new(daemon::dancer::neural_dancer(&model, o.seed)?),
     ));
+    // Ablations: the network's own timing, and a fresh noise draw every frame.
+    let mut own_timing = daemon::dancer::neural_dancer(&model, o.seed)?;
+    own_timing.set_beat_accent(0.0);
+    sources.push((NO_ACCENT.into(), Box::new(own_timing)));
+    let mut fresh_noise = daemon::dancer::neural_dancer(&model, o.seed)?;
+    fresh_noise.set_noise_correlation(0.0);
+    sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
+    let ablation = |name: &str| name == NO_ACCENT || name == FRESH_NOISE;
     for (name, dancer) in sources.iter_mut() {
         for t in temperatures {
             let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);
@@ -1039,7 +1055,7 @@ fn eval(o: &EvalOptions<'_>) -> Result<()> {
         .map(|p| p.rotations)
         .collect();
     let mut key_table =
-        String::from("\n| system | key-pose error cm at the target frame, announced");
+        String::from("\n| system (key-pose error at the target frame, cm), announced");
     for h in KEY_HORIZONS_S {
         key_table += &format!(" | {h} s ahead");
     }
@@ -1050,7 +1066,7 @@ fn eval(o: &EvalOptions<'_>) -> Result<()> {
     unaided.set_key_blend_frames(0);
     let mut key_sources: Vec<(String, &mut dyn MotionSource)> = sources
         .iter_mut()
-        .filter(|(n, _)| !n.contains("full"))
+        .filter(|(n, _)| !n.contains("full") && !ablation(n))
         .map(|(n, d)| (n.clone(), d.as_mut() as &mut dyn MotionSource))
         .collect();
     key_sources.push(("neural without the final blend".into(), &mut unaided));
@@ -1072,7 +1088,10 @@ fn eval(o: &EvalOptions<'_>) -> Result<()> {
         "\n| system | freezes in {:.0} min on each validation song (looped) | songs with a freeze |\n| --- | --- | --- |",
         LONG_RUN_S / 60.0
     );
-    for (name, dancer) in sources.iter_mut().filter(|(n, _)| !n.contains("full")) {
+    for (name, dancer) in sources
+        .iter_mut()
+        .filter(|(n, _)| !n.contains("full") && !ablation(n))
+    {
         for t in temperatures {
             let r = set.long_run_freezes(dancer.as_mut(), t, o.seed)?;
             println!(
@@ -1220,6 +1239,7 @@ fn generate(args: &GenerateArgs) -> Result<()> {
         (SourceKind::Neural, _) if seed_pose.is_some() => {
             let model = daemon::dancer::load_model(config.dancer.model.as_deref())?;
             let mut d = daemon::dancer::neural_dancer(&model, seed)?;
+            d.set_beat_accent(config.dancer.beat_accent);
             if let Some(name) = seed_pose {
                 d.set_seed_pose(&daemon::dancer::standing_features(
                     &bank_pose(name)?.rotations,
@@ -1230,9 +1250,10 @@ fn generate(args: &GenerateArgs) -> Result<()> {
         }
         _ => daemon::dancer::open_source(
             kind,
-            &SourceFiles {
+            &SourceSettings {
                 model: config.dancer.model.as_deref(),
                 library: config.dancer.library.as_deref(),
+                beat_accent: Some(config.dancer.beat_accent),
             },
             seed,
         )?,

@@ -1,4 +1,4 @@
-//! The shipped dancer end to end: the built-in clip library, the streaming analysis of a song,
+//! The retrieval dancer end to end: the built-in clip library, the streaming analysis of a song,
 //! and the motion it produces, scored with the dance metrics against the song's exact beats.
 
 mod common;
@@ -13,7 +13,12 @@ use model::source::Controls;
 /// poses (25 fps) and the song's beats.
 fn dance_to_demo(seconds: f64, temperature: f32, seed: u64) -> (Vec<Pose>, Vec<f64>) {
     let song = demo_track(seconds);
-    let mut dancer = daemon::dancer::default_source(seed).expect("the built-in library loads");
+    let mut dancer = daemon::dancer::open_source(
+        daemon::dancer::SourceKind::Retrieval,
+        &daemon::dancer::SourceSettings::default(),
+        seed,
+    )
+    .expect("the built-in library loads");
     let a = analyze_samples(
         "demo",
         &song.samples,
@@ -70,7 +75,7 @@ fn damaged_library_file_is_named_in_the_error() {
 }
 
 #[test]
-fn shipped_dancer_moves_on_the_beat_of_the_demo_song() {
+fn retrieval_dancer_moves_on_the_beat_of_the_demo_song() {
     let (poses, beats) = dance_to_demo(40.0, 0.5, 3);
     assert!(poses.iter().all(Pose::is_finite));
     let skeleton = Skeleton::default_adult();

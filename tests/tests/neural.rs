@@ -3,19 +3,30 @@
 
 mod common;
 
-use daemon::demo_track::{DEMO_RATE, demo_track};
+use daemon::demo_track::{DEMO_BPM, DEMO_RATE, demo_track};
 use daemon::offline::{AnalyzeOptions, analyze_samples};
-use model::metrics::{FreezeParams, JointTrack, detect_freezes};
-use model::neural::dancer::NeuralDancer;
+use model::metrics::{FreezeParams, JointTrack, beat_align, detect_freezes};
+use model::neural::dancer::{BEAT_ACCENT, NeuralDancer};
 use model::rig::{JOINT_COUNT, Pose, Skeleton};
 use model::source::{Controls, MotionSource};
 
 /// Dances `seconds` of the demo song with the shipped model at `temperature`; returns the poses
 /// (25 fps) and the held (non-finite or exploding) frames.
 fn dance_to_demo(seconds: f64, temperature: f32, seed: u64) -> (Vec<Pose>, u64) {
+    dance_to_demo_accented(seconds, temperature, seed, BEAT_ACCENT)
+}
+
+/// [`dance_to_demo`] with the beat accent `accent`.
+fn dance_to_demo_accented(
+    seconds: f64,
+    temperature: f32,
+    seed: u64,
+    accent: f32,
+) -> (Vec<Pose>, u64) {
     let song = demo_track(seconds);
     let model = daemon::dancer::load_model(None).expect("the built-in model loads");
     let mut dancer: NeuralDancer = daemon::dancer::neural_dancer(&model, seed).unwrap();
+    dancer.set_beat_accent(accent);
     let a = analyze_samples(
         "demo",
         &song.samples,
@@ -109,4 +120,38 @@ fn temperature_and_seed_shape_the_samples() {
     );
     assert_eq!(differ(&d, &e), 0, "a seed reproduces");
     assert!(differ(&c, &d) > 100, "T = 1 depends on the seed");
+}
+
+/// BeatAlign of `poses` (after the first 5 s, where the tracker locks) on the demo song's
+/// beats and half a beat off them.
+fn beat_align_on_and_off(poses: &[Pose]) -> (f64, f64) {
+    let skip = 5 * 25;
+    let positions = Skeleton::default_adult().trajectory(&poses[skip..]);
+    let track = JointTrack::new(&positions, JOINT_COUNT, 25.0).unwrap();
+    let seconds = poses.len() as f64 / 25.0;
+    let beats: Vec<f64> = demo_track(seconds)
+        .beats
+        .iter()
+        .map(|b| b - 5.0)
+        .filter(|b| *b >= 0.0)
+        .collect();
+    let half_beat = 30.0 / DEMO_BPM;
+    let shifted: Vec<f64> = beats.iter().map(|b| b + half_beat).collect();
+    (beat_align(&track, &beats), beat_align(&track, &shifted))
+}
+
+#[test]
+fn beat_accent_puts_the_moves_on_the_beat() {
+    let (accented, _) = dance_to_demo(40.0, 0.5, 3);
+    let (on, off) = beat_align_on_and_off(&accented);
+    let (own, _) = dance_to_demo_accented(40.0, 0.5, 3, 0.0);
+    let (own_on, own_off) = beat_align_on_and_off(&own);
+    eprintln!(
+        "BeatAlign on / off the beat: accented {on:.3} / {off:.3}, own timing {own_on:.3} / {own_off:.3}"
+    );
+    assert!(on > off + 0.1, "on {on:.3} vs off {off:.3}");
+    assert!(
+        on > own_on + 0.05,
+        "accented {on:.3} vs own timing {own_on:.3}"
+    );
 }

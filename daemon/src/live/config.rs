@@ -210,6 +210,8 @@ pub struct DancerConfig {
     pub seed: u64,
     /// Transition length of immediate key poses, beats.
     pub transition_beats: f32,
+    /// Depth of the neural dancer's beat accent (0: the network's own timing).
+    pub beat_accent: f32,
 }
 
 impl Default for DancerConfig {
@@ -221,6 +223,7 @@ impl Default for DancerConfig {
             temperature: 0.5,
             seed: 1,
             transition_beats: 1.0,
+            beat_accent: model::neural::dancer::BEAT_ACCENT,
         }
     }
 }
@@ -287,6 +290,13 @@ impl Config {
             return Err(bad(
                 "dancer.transition_beats",
                 format!("= {b}: must be in 0..=64"),
+            ));
+        }
+        let a = self.dancer.beat_accent;
+        if !(a.is_finite() && (0.0..=0.9).contains(&a)) {
+            return Err(bad(
+                "dancer.beat_accent",
+                format!("= {a}: must be in 0..=0.9"),
             ));
         }
         match crate::dancer::SourceKind::parse(&self.dancer.source) {
@@ -386,5 +396,19 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("dancer.model"), "{e}");
+    }
+
+    #[test]
+    fn beat_accent_is_checked() {
+        let c = Config::parse("[dancer]\nbeat_accent = 0.4\n", Path::new("x.toml")).unwrap();
+        assert_eq!(c.dancer.beat_accent, 0.4);
+        for bad in ["-0.1", "0.95", "nan"] {
+            let e = Config::parse(
+                &format!("[dancer]\nbeat_accent = {bad}\n"),
+                Path::new("x.toml"),
+            )
+            .unwrap_err();
+            assert!(e.to_string().contains("dancer.beat_accent"), "{bad}: {e}");
+        }
     }
 }
