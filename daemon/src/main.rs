@@ -1000,6 +1000,7 @@ fn eval(o: &EvalOptions<'_>) -> Result<()> {
     use daemon::eval::{KEY_HORIZONS_S, LONG_RUN_S};
     const NO_ACCENT: &str = "neural, no beat accent";
     const FRESH_NOISE: &str = "neural, independent noise";
+    const NO_FOOT_LOCK: &str = "neural, no foot lock";
     use model::source::MotionSource;
     let started = Instant::now();
     let set = daemon::eval::EvalSet::load(o.data, o.jobs)?;
@@ -1027,14 +1028,17 @@ fn eval(o: &EvalOptions<'_>) -> Result<()> {
         "neural".into(),
         Box::new(daemon::dancer::neural_dancer(&model, o.seed)?),
     ));
-    // Ablations: the network's own timing, and a fresh noise draw every frame.
+    // Ablations: the network's own timing, a fresh noise draw every frame, free feet.
     let mut own_timing = daemon::dancer::neural_dancer(&model, o.seed)?;
     own_timing.set_beat_accent(0.0);
     sources.push((NO_ACCENT.into(), Box::new(own_timing)));
     let mut fresh_noise = daemon::dancer::neural_dancer(&model, o.seed)?;
     fresh_noise.set_noise_correlation(0.0);
     sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
-    let ablation = |name: &str| name == NO_ACCENT || name == FRESH_NOISE;
+    let mut free_feet = daemon::dancer::neural_dancer(&model, o.seed)?;
+    free_feet.set_foot_lock(0.0);
+    sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
+    let ablation = |name: &str| [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name);
     for (name, dancer) in sources.iter_mut() {
         for t in temperatures {
             let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);

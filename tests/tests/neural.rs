@@ -3,30 +3,36 @@
 
 mod common;
 
+#[global_allocator]
+static ALLOCATOR: daemon::alloc_counter::CountingAllocator =
+    daemon::alloc_counter::CountingAllocator;
+
 use daemon::demo_track::{DEMO_BPM, DEMO_RATE, demo_track};
 use daemon::offline::{AnalyzeOptions, analyze_samples};
-use model::metrics::{FreezeParams, JointTrack, beat_align, detect_freezes};
-use model::neural::dancer::{BEAT_ACCENT, NeuralDancer};
+use model::metrics::{
+    ContactParams, FreezeParams, JointTrack, beat_align, detect_freezes, foot_skating,
+};
+use model::neural::dancer::NeuralDancer;
 use model::rig::{JOINT_COUNT, Pose, Skeleton};
 use model::source::{Controls, MotionSource};
 
 /// Dances `seconds` of the demo song with the shipped model at `temperature`; returns the poses
 /// (25 fps) and the held (non-finite or exploding) frames.
 fn dance_to_demo(seconds: f64, temperature: f32, seed: u64) -> (Vec<Pose>, u64) {
-    dance_to_demo_accented(seconds, temperature, seed, BEAT_ACCENT)
+    dance_to_demo_with(seconds, temperature, seed, |_| {})
 }
 
-/// [`dance_to_demo`] with the beat accent `accent`.
-fn dance_to_demo_accented(
+/// [`dance_to_demo`] with the dancer's settings changed by `configure`.
+fn dance_to_demo_with(
     seconds: f64,
     temperature: f32,
     seed: u64,
-    accent: f32,
+    configure: impl FnOnce(&mut NeuralDancer),
 ) -> (Vec<Pose>, u64) {
     let song = demo_track(seconds);
     let model = daemon::dancer::load_model(None).expect("the built-in model loads");
     let mut dancer: NeuralDancer = daemon::dancer::neural_dancer(&model, seed).unwrap();
-    dancer.set_beat_accent(accent);
+    configure(&mut dancer);
     let a = analyze_samples(
         "demo",
         &song.samples,
@@ -144,7 +150,7 @@ fn beat_align_on_and_off(poses: &[Pose]) -> (f64, f64) {
 fn beat_accent_puts_the_moves_on_the_beat() {
     let (accented, _) = dance_to_demo(40.0, 0.5, 3);
     let (on, off) = beat_align_on_and_off(&accented);
-    let (own, _) = dance_to_demo_accented(40.0, 0.5, 3, 0.0);
+    let (own, _) = dance_to_demo_with(40.0, 0.5, 3, |d| d.set_beat_accent(0.0));
     let (own_on, own_off) = beat_align_on_and_off(&own);
     eprintln!(
         "BeatAlign on / off the beat: accented {on:.3} / {off:.3}, own timing {own_on:.3} / {own_off:.3}"
@@ -154,4 +160,61 @@ fn beat_accent_puts_the_moves_on_the_beat() {
         on > own_on + 0.05,
         "accented {on:.3} vs own timing {own_on:.3}"
     );
+}
+
+#[test]
+fn foot_lock_keeps_planted_feet_from_skating() {
+    let skate = |poses: &[Pose]| {
+        let positions = Skeleton::default_adult().trajectory(poses);
+        let track = JointTrack::new(&positions, JOINT_COUNT, 25.0).unwrap();
+        let toes = [
+            model::rig::Joint::LeftToes.index(),
+            model::rig::Joint::RightToes.index(),
+        ];
+        foot_skating(&track, &toes, ContactParams::default())
+            .unwrap()
+            .mean_speed_mps
+    };
+    let (locked, _) = dance_to_demo(30.0, 0.5, 3);
+    let (free, _) = dance_to_demo_with(30.0, 0.5, 3, |d| d.set_foot_lock(0.0));
+    let (locked, free) = (skate(&locked), skate(&free));
+    eprintln!("foot skating {locked:.3} m/s locked, {free:.3} m/s free");
+    assert!(
+        locked < 0.85 * free,
+        "locked {locked:.3} vs free {free:.3} m/s"
+    );
+}
+
+#[test]
+fn stepping_the_dancer_does_not_allocate() {
+    let model = daemon::dancer::load_model(None).unwrap();
+    let mut dancer = daemon::dancer::neural_dancer(&model, 5).unwrap();
+    let song = demo_track(12.0);
+    let a = analyze_samples(
+        "demo",
+        &song.samples,
+        DEMO_RATE,
+        2,
+        AnalyzeOptions::native(Some(25.0)),
+    )
+    .unwrap();
+    let music: Vec<_> = a.features.iter().map(|f| f.values).collect();
+    let look = dancer.lookahead_frames();
+    let rotations = Pose::rest().local_rotations;
+    let mut pose = Pose::rest();
+    let before = daemon::alloc_counter::callback_allocations();
+    daemon::alloc_counter::in_callback(|| {
+        for i in 0..music.len() - look {
+            let controls = Controls {
+                temperature: if i % 100 < 50 { 1.0 } else { 0.3 },
+                key_pose: (i % 60 > 30).then_some(model::source::KeyPoseTarget {
+                    rotations,
+                    frames_to_go: (60 - i % 60) as u32,
+                }),
+            };
+            dancer.step(&music[i..=i + look], &controls, &mut pose);
+        }
+    });
+    assert_eq!(daemon::alloc_counter::callback_allocations() - before, 0);
+    assert!(pose.is_finite());
 }

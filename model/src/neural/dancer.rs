@@ -12,6 +12,7 @@
 
 use dsp::feature::{FEATURE_DIM, FeatureLayout};
 
+use crate::foot_lock::{self, FootLock};
 use crate::motion::{
     MOTION_FEATURE_DIM, MotionDecoder, ROOT_DFACING, ROOT_DX, ROOT_DZ, ROTATIONS, RootState,
 };
@@ -19,7 +20,7 @@ use crate::neural::file::{FRAME_RATE, ModelFileError, NeuralModel};
 use crate::neural::rng::Rng;
 use crate::neural::runtime::Runtime;
 use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
-use crate::rig::Pose;
+use crate::rig::{Pose, Skeleton};
 use crate::source::{Controls, MotionSource};
 
 /// A normalised output beyond this many standard deviations counts as exploding.
@@ -93,6 +94,7 @@ pub struct NeuralDancer {
     /// Pose the dancer glides from after a restart, and the frames of the glide left.
     glide_from: Pose,
     glide_left: u32,
+    foot_lock: FootLock,
     previous_raw: [f32; MOTION_FEATURE_DIM],
     mean_speed_mps: f32,
     speed_limited: u64,
@@ -155,6 +157,11 @@ impl NeuralDancer {
             beat_accent: BEAT_ACCENT,
             glide_from: Pose::rest(),
             glide_left: 0,
+            foot_lock: FootLock::new(
+                Skeleton::default_adult(),
+                FRAME_RATE as f32,
+                foot_lock::DEFAULT_STRENGTH,
+            ),
             previous_raw: [0.0; MOTION_FEATURE_DIM],
             mean_speed_mps: 0.0,
             speed_limited: 0,
@@ -199,6 +206,12 @@ impl NeuralDancer {
         } else {
             0.0
         };
+    }
+
+    /// Sets the share of a planted toe's drift the [`FootLock`] takes back (0: off; default
+    /// [`foot_lock::DEFAULT_STRENGTH`]).
+    pub fn set_foot_lock(&mut self, strength: f32) {
+        self.foot_lock.set_strength(strength);
     }
 
     /// Frames since the last reset whose steps were shortened to keep the sustained speed
@@ -358,6 +371,7 @@ impl MotionSource for NeuralDancer {
                 }
                 self.glide_left -= 1;
             }
+            self.foot_lock.process(out);
             self.last_good = *out;
             self.previous.copy_from_slice(&self.sample);
             self.previous_raw = self.features;
@@ -394,6 +408,7 @@ impl MotionSource for NeuralDancer {
         self.mean_speed_mps = 0.0;
         self.speed_limited = 0;
         self.glide_left = 0;
+        self.foot_lock.reset();
     }
 }
 
