@@ -128,7 +128,8 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     }
     if mode == RunMode::Interactive {
         eprintln!(
-            "dancing to {what}; {} Hz out to {targets}; declared look-ahead {:.0} ms; Ctrl-C stops",
+            "{} dancer dancing to {what}; {} Hz out to {targets}; declared look-ahead {:.0} ms; Ctrl-C stops",
+            kind.name(),
             settings.rate_hz,
             pipeline.declared_lookahead_s() * 1000.0
         );
