@@ -527,8 +527,9 @@ mod tests {
         );
     }
 
-    #[test]
-    fn sustained_speed_is_limited_but_bursts_pass() {
+    /// A dancer on the untrained tiny network whose samples are clamped to ±0.5 in every
+    /// feature, except where `narrow` sets (feature, low, high).
+    fn ranged_dancer(narrow: &[(usize, f32, f32)]) -> NeuralDancer {
         let c = NetConfig::tiny();
         let mut tensors = init_net(&c, 1);
         tensors.perturb(3, 0.05);
@@ -537,16 +538,22 @@ mod tests {
             tensors,
             training: TrainingSummary::default(),
         };
-        // Every frame steps 0.2–0.3 m forward: 5–7.5 m/s, a sprint no dance keeps up.
         let mut lo = [-0.5f32; MOTION_FEATURE_DIM];
         let mut hi = [0.5f32; MOTION_FEATURE_DIM];
-        lo[ROOT_DZ] = 0.2;
-        hi[ROOT_DZ] = 0.3;
-        lo[ROOT_DX] = 0.0;
-        hi[ROOT_DX] = 0.0;
+        for &(i, l, h) in narrow {
+            lo[i] = l;
+            hi[i] = h;
+        }
         model.set_pose_range(&[lo, hi]);
-        let mut d = NeuralDancer::new(&model).unwrap();
+        NeuralDancer::new(&model).unwrap()
+    }
+
+    #[test]
+    fn sustained_speed_is_limited_but_bursts_pass() {
+        // Every frame steps 0.2–0.3 m forward: 5–7.5 m/s, a sprint no dance keeps up.
+        let mut d = ranged_dancer(&[(ROOT_DZ, 0.2, 0.3), (ROOT_DX, 0.0, 0.0)]);
         d.set_beat_accent(0.0);
+        d.set_foot_lock(0.0);
         d.reset(4);
         let mut pose = Pose::rest();
         let controls = Controls {
@@ -581,21 +588,8 @@ mod tests {
 
     #[test]
     fn samples_stay_within_the_training_range() {
-        let c = NetConfig::tiny();
-        let mut tensors = init_net(&c, 1);
-        tensors.perturb(3, 0.05);
-        let mut model = NeuralModel {
-            config: c,
-            tensors,
-            training: TrainingSummary::default(),
-        };
         // A narrow range: every height between 0.9 and 1.0 m, every other feature in ±0.5.
-        let mut lo = [-0.5f32; MOTION_FEATURE_DIM];
-        let mut hi = [0.5f32; MOTION_FEATURE_DIM];
-        lo[crate::motion::ROOT_Y] = 0.9;
-        hi[crate::motion::ROOT_Y] = 1.0;
-        model.set_pose_range(&[lo, hi]);
-        let mut d = NeuralDancer::new(&model).unwrap();
+        let mut d = ranged_dancer(&[(crate::motion::ROOT_Y, 0.9, 1.0)]);
         d.reset(4);
         let mut pose = Pose::rest();
         let controls = Controls {
