@@ -324,6 +324,7 @@ pub fn dance_to(
         let controls = Controls {
             temperature,
             key_pose: target_at(cues, i, lead),
+            beat_accent: None,
         };
         source.step(&music[i..=i + look], &controls, &mut pose);
         out.push(pose);

@@ -1277,6 +1277,7 @@ fn generate(args: &GenerateArgs) -> Result<()> {
         let controls = Controls {
             temperature,
             key_pose: daemon::key_cue::target_at(&cues, i, lead_frames),
+            beat_accent: None,
         };
         // The frame and its look-ahead, as the live pipeline hands them over (shorter at the end).
         let window = &music[i..(i + look + 1).min(music.len())];

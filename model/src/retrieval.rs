@@ -803,6 +803,7 @@ mod tests {
         let controls = Controls {
             temperature: 2.0,
             key_pose: None,
+            beat_accent: None,
         };
         let mut out = Pose::rest();
         for m in &music {
@@ -865,6 +866,7 @@ mod tests {
         let warm = Controls {
             temperature: 1.0,
             key_pose: None,
+            beat_accent: None,
         };
         let mut d = RetrievalDancer::from_dances(&library(), 1).unwrap();
         let x = run(&mut d, &music, &warm);
@@ -894,6 +896,7 @@ mod tests {
             let controls = Controls {
                 temperature: 0.5,
                 key_pose,
+                beat_accent: None,
             };
             let before = out;
             dancer.step(std::slice::from_ref(m), &controls, &mut out);

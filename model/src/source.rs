@@ -33,6 +33,9 @@ pub struct Controls {
     pub temperature: f32,
     /// A key pose to reach, if any.
     pub key_pose: Option<KeyPoseTarget>,
+    /// Depth of the beat accent, overriding the source's own (None keeps it; sources that
+    /// time their motion otherwise ignore it).
+    pub beat_accent: Option<f32>,
 }
 
 impl Default for Controls {
@@ -41,6 +44,7 @@ impl Default for Controls {
         Controls {
             temperature: 0.0,
             key_pose: None,
+            beat_accent: None,
         }
     }
 }

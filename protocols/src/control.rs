@@ -19,6 +19,9 @@ pub const TEMPERATURE_RANGE: (f32, f32) = (0.0, 2.0);
 /// Tempo hints outside this range (BPM) are rejected as nonsense.
 pub const TEMPO_HINT_RANGE: (f32, f32) = (30.0, 300.0);
 
+/// Range a beat accent depth is clamped to.
+pub const BEAT_ACCENT_RANGE: (f32, f32) = (0.0, 0.9);
+
 /// When a key pose should be reached.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
 #[serde(try_from = "String")]
@@ -71,6 +74,8 @@ impl TryFrom<String> for Quantize {
 pub enum ControlEvent {
     /// Sampling temperature of the dancer, in [0, 2].
     Temperature(f32),
+    /// Depth of the dancer's beat accent (how much it slows into each beat), in [0, 0.9].
+    BeatAccent(f32),
     /// Reach the named key pose at the given musical time.
     KeyPose {
         /// Pose name in the pose bank.
@@ -194,6 +199,10 @@ impl ControlParser {
             "/temperature" => {
                 let t = one_float(args)?;
                 ControlEvent::Temperature(t.clamp(TEMPERATURE_RANGE.0, TEMPERATURE_RANGE.1))
+            }
+            "/accent" => {
+                let a = one_float(args)?;
+                ControlEvent::BeatAccent(a.clamp(BEAT_ACCENT_RANGE.0, BEAT_ACCENT_RANGE.1))
             }
             "/keypose" => {
                 let name = match args.first() {
@@ -377,6 +386,18 @@ mod tests {
             (
                 msg("/danced/control/temperature", vec![OscType::Double(1.25)]),
                 ControlEvent::Temperature(1.25),
+            ),
+            (
+                msg("/danced/control/accent", vec![OscType::Float(0.3)]),
+                ControlEvent::BeatAccent(0.3),
+            ),
+            (
+                msg("/danced/control/accent", vec![OscType::Int(4)]),
+                ControlEvent::BeatAccent(0.9),
+            ),
+            (
+                msg("/danced/control/accent", vec![OscType::Float(-1.0)]),
+                ControlEvent::BeatAccent(0.0),
             ),
             (
                 msg("/danced/control/keypose", vec![s("arms-up")]),

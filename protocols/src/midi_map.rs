@@ -1,6 +1,8 @@
 //! What MIDI input means to the dancer, loaded from a TOML file (format in the crate README).
 
-use crate::control::{ControlEvent, Quantize, TEMPERATURE_RANGE, TEMPO_HINT_RANGE};
+use crate::control::{
+    BEAT_ACCENT_RANGE, ControlEvent, Quantize, TEMPERATURE_RANGE, TEMPO_HINT_RANGE,
+};
 use crate::error::ProtocolError;
 use crate::midi::{MidiMessage, MidiParser};
 use crate::midi_clock::{MidiClockTempo, TICKS_PER_BEAT};
@@ -20,6 +22,8 @@ pub enum CcTarget {
     Temperature,
     /// Transition length in beats.
     Transition,
+    /// Depth of the beat accent.
+    Accent,
 }
 
 /// One note → key pose rule as written in the file.
@@ -180,6 +184,9 @@ impl MidiMap {
                             x.clamp(TEMPERATURE_RANGE.0, TEMPERATURE_RANGE.1),
                         ),
                         CcTarget::Transition => ControlEvent::TransitionBeats(x),
+                        CcTarget::Accent => ControlEvent::BeatAccent(
+                            x.clamp(BEAT_ACCENT_RANGE.0, BEAT_ACCENT_RANGE.1),
+                        ),
                     });
                 }
             }
@@ -297,6 +304,12 @@ fn validate(c: &MidiMapConfig) -> Result<(), String> {
                     TEMPERATURE_RANGE.0, TEMPERATURE_RANGE.1
                 ));
             }
+            CcTarget::Accent if lo < BEAT_ACCENT_RANGE.0 || hi > BEAT_ACCENT_RANGE.1 => {
+                return Err(format!(
+                    "{what}: accent range {lo}..{hi} is outside {}..{}",
+                    BEAT_ACCENT_RANGE.0, BEAT_ACCENT_RANGE.1
+                ));
+            }
             CcTarget::Transition if lo <= 0.0 => {
                 return Err(format!("{what}: transition beats must be > 0, got {lo}"));
             }
@@ -365,6 +378,11 @@ mod tests {
             panic!()
         };
         assert!((b - (0.25 + 3.75 * 64.0 / 127.0)).abs() < 1e-6);
+        assert_eq!(map(&mut m, cc(71, 0)), vec![ControlEvent::BeatAccent(0.0)]);
+        assert_eq!(
+            map(&mut m, cc(71, 127)),
+            vec![ControlEvent::BeatAccent(0.6)]
+        );
         assert!(map(&mut m, cc(7, 64)).is_empty());
         assert_eq!(
             map(
@@ -502,6 +520,10 @@ mod tests {
             (
                 "[[cc]]\ncontroller = 1\ntarget = \"transition\"\nmin = 0\nmax = 3",
                 "> 0",
+            ),
+            (
+                "[[cc]]\ncontroller = 1\ntarget = \"accent\"\nmin = 0\nmax = 1",
+                "accent range",
             ),
             (
                 "[[cc]]\ncontroller = 1\ntarget = \"tempo\"\nmin = 0\nmax = 3",

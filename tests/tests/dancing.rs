@@ -30,6 +30,7 @@ fn dance_to_demo(seconds: f64, temperature: f32, seed: u64) -> (Vec<Pose>, Vec<f
     let controls = Controls {
         temperature,
         key_pose: None,
+        beat_accent: None,
     };
     let mut pose = Pose::rest();
     let poses = a

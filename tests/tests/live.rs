@@ -43,7 +43,8 @@ struct Seen {
     frames_to_go: Option<u32>,
 }
 
-/// Echoes the temperature into the hips' yaw (radians) and records key-pose countdowns.
+/// Echoes the temperature into the hips' yaw and the beat accent (if set) into the spine's
+/// yaw (radians), and records key-pose countdowns.
 struct EchoSource {
     steps: u64,
     seen: Arc<Mutex<Vec<Seen>>>,
@@ -60,6 +61,9 @@ impl MotionSource for EchoSource {
         assert_eq!(music.len(), 3);
         *out = Pose::rest();
         out.set_rotation(Joint::Hips, Quat::from_rotation_y(controls.temperature));
+        if let Some(a) = controls.beat_accent {
+            out.set_rotation(Joint::Spine, Quat::from_rotation_y(a));
+        }
         if let Ok(mut s) = self.seen.lock() {
             s.push(Seen {
                 step: self.steps,
@@ -185,6 +189,7 @@ fn fast_replay_frames_beats_and_controls() {
         speed,
         vec![
             (1.5, ControlEvent::Temperature(0.8)),
+            (1.6, ControlEvent::BeatAccent(0.4)),
             (
                 2.0,
                 ControlEvent::KeyPose {
@@ -246,6 +251,15 @@ fn fast_replay_frames_beats_and_controls() {
     );
     let first = &r.frames[0].0;
     assert!((hips_yaw(first).abs() - 0.1).abs() < 1e-3);
+    // So did the beat accent, which the first frames did not have.
+    let spine_yaw = |f: &BodyFrame| {
+        f.bones[Joint::Spine.index()]
+            .local_rotation
+            .to_axis_angle()
+            .1
+    };
+    assert!((spine_yaw(last) - 0.4).abs() < 1e-3, "{}", spine_yaw(last));
+    assert!(spine_yaw(first) < 1e-3);
 
     // The key pose counted down by one per frame to 0, on a click.
     let countdown: Vec<Seen> = r
@@ -268,7 +282,7 @@ fn fast_replay_frames_beats_and_controls() {
         (t - click).abs() < 0.07,
         "key pose at {t:.3} s, click at {click:.3} s"
     );
-    assert_eq!(r.report.controls_accepted, 2);
+    assert_eq!(r.report.controls_accepted, 3);
     assert_eq!(r.report.controls_rejected, 1);
 }
 

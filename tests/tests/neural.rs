@@ -46,6 +46,7 @@ fn dance_to_demo_with(
     let controls = Controls {
         temperature,
         key_pose: None,
+        beat_accent: None,
     };
     let mut pose = Pose::rest();
     let poses = (0..music.len())
@@ -211,6 +212,8 @@ fn stepping_the_dancer_does_not_allocate() {
                     rotations,
                     frames_to_go: (60 - i % 60) as u32,
                 }),
+                // The accent knob turned live, as a performer would.
+                beat_accent: Some((i % 90) as f32 / 100.0),
             };
             dancer.step(&music[i..=i + look], &controls, &mut pose);
         }

@@ -107,6 +107,7 @@ pub fn run(
         controls: Controls {
             temperature: settings.temperature,
             key_pose: None,
+            beat_accent: None,
         },
         transition_beats: settings.transition_beats,
         tempo_hint: 0.0,
@@ -194,6 +195,9 @@ fn apply(
     match event {
         ControlEvent::Temperature(t) if t.is_finite() && (0.0..=10.0).contains(&t) => {
             st.controls.temperature = t;
+        }
+        ControlEvent::BeatAccent(a) if a.is_finite() && (0.0..=0.9).contains(&a) => {
+            st.controls.beat_accent = Some(a);
         }
         ControlEvent::KeyPose { name, quantize } => {
             let Some(rotations) = poses.get(&name) else {

@@ -190,12 +190,9 @@ impl NeuralDancer {
     /// puts its kinematic beats barely above chance (BeatAlign 0.245 against 0.229 on other
     /// songs' beats); the retrieval dancer's time-warp does the same job for its clips.
     /// 0 turns it off; values outside [0, 0.9] are clamped.
+    /// A live [`Controls::beat_accent`] overrides it.
     pub fn set_beat_accent(&mut self, depth: f32) {
-        self.beat_accent = if depth.is_finite() {
-            depth.clamp(0.0, 0.9)
-        } else {
-            0.0
-        };
+        self.beat_accent = clean_accent(depth);
     }
 
     /// Sets the frame-to-frame correlation ρ of the latent noise, in [0, 0.999] (0: a fresh
@@ -246,8 +243,8 @@ impl NeuralDancer {
     /// Retimes the raw `features` of the next frame within the beat (`beat_cos`: cosine of the
     /// beat phase at this frame, 1 on the beat) and shortens its step over the floor where the
     /// sustained speed would pass the limit.
-    fn shape_motion(&mut self, beat_cos: f32) {
-        let pace = 1.0 - self.beat_accent * beat_cos.clamp(-1.0, 1.0);
+    fn shape_motion(&mut self, beat_cos: f32, accent: f32) {
+        let pace = 1.0 - accent * beat_cos.clamp(-1.0, 1.0);
         for (i, (f, p)) in self.features.iter_mut().zip(&self.previous_raw).enumerate() {
             *f = match i {
                 // Displacements per frame: the pace scales them directly.
@@ -345,7 +342,11 @@ impl MotionSource for NeuralDancer {
                 .map(|now| now[FeatureLayout::BEAT_COS])
                 .filter(|c| c.is_finite())
                 .unwrap_or(0.0);
-            self.shape_motion(beat_cos);
+            let accent = match controls.beat_accent {
+                Some(a) => clean_accent(a),
+                None => self.beat_accent,
+            };
+            self.shape_motion(beat_cos, accent);
             if let Some(ftg) = key.filter(|&f| f < self.key_blend_frames) {
                 let x = 1.0 - ftg as f32 / self.key_blend_frames as f32;
                 let w = x * x * (3.0 - 2.0 * x);
@@ -412,6 +413,15 @@ impl MotionSource for NeuralDancer {
     }
 }
 
+/// A beat accent depth in [0, 0.9] (non-finite: 0).
+fn clean_accent(depth: f32) -> f32 {
+    if depth.is_finite() {
+        depth.clamp(0.0, 0.9)
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -443,6 +453,7 @@ mod tests {
                 rotations: [Quat::IDENTITY; 22],
                 frames_to_go: 12,
             }),
+            beat_accent: None,
         };
         let run = |d: &mut NeuralDancer| {
             d.reset(5);
@@ -490,8 +501,24 @@ mod tests {
                 "cos {cos}: {accented} / {own}, want {want}"
             );
         }
-        // Out-of-range depths are clamped, not passed on.
+        // A live control overrides the dancer's own depth for as long as it is sent.
         let own = first_step(&mut d, 0.0, 1.0);
+        let mut music = [[0.1f32; FEATURE_DIM]; 3];
+        for m in music.iter_mut() {
+            m[FeatureLayout::BEAT_SIN] = 0.0;
+            m[FeatureLayout::BEAT_COS] = 1.0;
+        }
+        d.set_beat_accent(0.0);
+        d.reset(3);
+        let mut pose = Pose::rest();
+        let live = Controls {
+            beat_accent: Some(0.5),
+            ..Controls::default()
+        };
+        d.step(&music, &live, &mut pose);
+        let stepped = pose.root_position.x.hypot(pose.root_position.z);
+        assert!((stepped / own - 0.5).abs() < 1e-3, "{stepped} / {own}");
+        // Out-of-range depths are clamped, not passed on.
         assert!((first_step(&mut d, 5.0, 1.0) / own - 0.1).abs() < 1e-3);
         assert_eq!(first_step(&mut d, f32::NAN, 1.0), own);
     }
@@ -503,6 +530,7 @@ mod tests {
         let controls = Controls {
             temperature: 1.0,
             key_pose: None,
+            beat_accent: None,
         };
         // Mean frame-to-frame change and spread over time of one joint's rotation.
         let mut run = |rho: f32| {
@@ -559,6 +587,7 @@ mod tests {
         let controls = Controls {
             temperature: 1.0,
             key_pose: None,
+            beat_accent: None,
         };
         let mut track = Vec::new();
         for _ in 0..500 {
@@ -595,6 +624,7 @@ mod tests {
         let controls = Controls {
             temperature: 1.0,
             key_pose: None,
+            beat_accent: None,
         };
         let margin = RANGE_MARGIN * 0.1 + 1e-4;
         let mut sampled = 0;
@@ -634,6 +664,7 @@ mod tests {
                         rotations,
                         frames_to_go: ftg,
                     }),
+                    beat_accent: None,
                 };
                 d.step(&music, &controls, &mut pose);
             }
@@ -675,6 +706,7 @@ mod tests {
         let controls = Controls {
             temperature: 1.0,
             key_pose: None,
+            beat_accent: None,
         };
         for _ in 0..2 * RESTART_AFTER_HELD {
             d.step(&[[0.0; FEATURE_DIM]], &controls, &mut pose);
