@@ -108,6 +108,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         margin_ms: config.output.margin_ms,
         temperature: config.dancer.temperature,
         transition_beats: config.dancer.transition_beats,
+        beat_accent: Some(config.dancer.beat_accent),
         realtime: config.output.realtime,
         ..PipelineSettings::default()
     };

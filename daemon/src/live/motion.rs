@@ -69,6 +69,8 @@ pub struct MotionSettings {
     pub temperature: f32,
     /// Initial transition length (beats) for `Quantize::Now` key poses.
     pub transition_beats: f32,
+    /// Initial beat accent (None: the source's own).
+    pub beat_accent: Option<f32>,
 }
 
 struct KeyPose {
@@ -107,7 +109,7 @@ pub fn run(
         controls: Controls {
             temperature: settings.temperature,
             key_pose: None,
-            beat_accent: None,
+            beat_accent: settings.beat_accent,
         },
         transition_beats: settings.transition_beats,
         tempo_hint: 0.0,
@@ -115,6 +117,9 @@ pub fn run(
         key: None,
     };
     stats.temperature.set(st.controls.temperature);
+    stats
+        .beat_accent
+        .set(st.controls.beat_accent.unwrap_or(f32::NAN));
     let mut next_time = 0.0f64;
     while !stop.load(Ordering::Relaxed) {
         while let Ok(c) = controls.try_recv() {
@@ -128,6 +133,9 @@ pub fn run(
             counter.fetch_add(1, Ordering::Relaxed);
         }
         stats.temperature.set(st.controls.temperature);
+        stats
+            .beat_accent
+            .set(st.controls.beat_accent.unwrap_or(f32::NAN));
         stats.paused.store(u32::from(st.paused), Ordering::Relaxed);
         let msg = match features.recv_timeout(Duration::from_millis(5)) {
             Ok(m) => m,

@@ -37,6 +37,8 @@ pub struct PipelineSettings {
     pub temperature: f32,
     /// Initial transition length for immediate key poses, beats.
     pub transition_beats: f32,
+    /// Initial beat accent (None: the source's own).
+    pub beat_accent: Option<f32>,
     /// Wall time without audio after which silence is analysed instead, seconds.
     pub silence_after_s: f64,
     /// Run the threads at real-time priority where the system allows it.
@@ -52,6 +54,7 @@ impl Default for PipelineSettings {
             margin_ms: 8.0,
             temperature: 0.5,
             transition_beats: 1.0,
+            beat_accent: None,
             silence_after_s: 0.25,
             realtime: true,
         }
@@ -192,6 +195,7 @@ impl Pipeline {
             let s = MotionSettings {
                 temperature: settings.temperature,
                 transition_beats: settings.transition_beats,
+                beat_accent: settings.beat_accent,
             };
             let PipelineParts {
                 source,

@@ -152,6 +152,8 @@ pub struct Stats {
     pub beat_phase: AtomicF32,
     /// Current temperature.
     pub temperature: AtomicF32,
+    /// Current beat accent (NaN: the source's own).
+    pub beat_accent: AtomicF32,
     /// Key pose state (`KEY_POSE_*`).
     pub key_pose_state: AtomicU32,
     /// Frames left to a pending key pose.
@@ -189,6 +191,7 @@ impl Stats {
             tempo_bpm: AtomicF32::default(),
             beat_phase: AtomicF32::default(),
             temperature: AtomicF32::default(),
+            beat_accent: AtomicF32::default(),
             key_pose_state: AtomicU32::new(KEY_POSE_NONE),
             key_pose_frames_to_go: AtomicU32::new(0),
             paused: AtomicU32::new(0),

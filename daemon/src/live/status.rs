@@ -17,13 +17,17 @@ pub fn status_line(stats: &Stats) -> String {
         KEY_POSE_REACHED => "reached".to_string(),
         _ => "none".to_string(),
     };
+    let accent = match stats.beat_accent.get() {
+        a if a.is_finite() => format!("{a:.2}"),
+        _ => "–".to_string(),
+    };
     let paused = if stats.paused.load(Ordering::Relaxed) == 1 {
         " PAUSED"
     } else {
         ""
     };
     format!(
-        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | key pose {key} | drops {} | packets {}{paused}",
+        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | key pose {key} | drops {} | packets {}{paused}",
         stats.tempo_bpm.get(),
         stats.beat_phase.get(),
         stats.latency.quantile_ms(0.99),
