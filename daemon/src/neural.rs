@@ -363,7 +363,7 @@ pub fn time_frames(
                 frames_to_go: 99 - (i % 100) as u32,
                 ..key
             }),
-            beat_accent: None,
+            ..Controls::default()
         };
         let t = Instant::now();
         dancer.step(&music, &controls, &mut pose);
@@ -387,8 +387,7 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
     let music = &song[..dancer.lookahead_frames() + 1];
     let controls = Controls {
         temperature: args.temperature,
-        key_pose: None,
-        beat_accent: None,
+        ..Controls::default()
     };
     dancer.step(music, &controls, &mut pose);
     let (worst, value) = dancer

@@ -802,8 +802,7 @@ mod tests {
         }
         let controls = Controls {
             temperature: 2.0,
-            key_pose: None,
-            beat_accent: None,
+            ..Controls::default()
         };
         let mut out = Pose::rest();
         for m in &music {
@@ -865,8 +864,7 @@ mod tests {
 
         let warm = Controls {
             temperature: 1.0,
-            key_pose: None,
-            beat_accent: None,
+            ..Controls::default()
         };
         let mut d = RetrievalDancer::from_dances(&library(), 1).unwrap();
         let x = run(&mut d, &music, &warm);
@@ -896,7 +894,7 @@ mod tests {
             let controls = Controls {
                 temperature: 0.5,
                 key_pose,
-                beat_accent: None,
+                ..Controls::default()
             };
             let before = out;
             dancer.step(std::slice::from_ref(m), &controls, &mut out);

@@ -29,8 +29,7 @@ fn dance_to_demo(seconds: f64, temperature: f32, seed: u64) -> (Vec<Pose>, Vec<f
     .expect("the demo song analyses");
     let controls = Controls {
         temperature,
-        key_pose: None,
-        beat_accent: None,
+        ..Controls::default()
     };
     let mut pose = Pose::rest();
     let poses = a

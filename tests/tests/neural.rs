@@ -45,8 +45,7 @@ fn dance_to_demo_with(
     let look = dancer.lookahead_frames();
     let controls = Controls {
         temperature,
-        key_pose: None,
-        beat_accent: None,
+        ..Controls::default()
     };
     let mut pose = Pose::rest();
     let poses = (0..music.len())

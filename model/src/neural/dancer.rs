@@ -453,7 +453,7 @@ mod tests {
                 rotations: [Quat::IDENTITY; 22],
                 frames_to_go: 12,
             }),
-            beat_accent: None,
+            ..Controls::default()
         };
         let run = |d: &mut NeuralDancer| {
             d.reset(5);
@@ -529,8 +529,7 @@ mod tests {
         d.set_beat_accent(0.0);
         let controls = Controls {
             temperature: 1.0,
-            key_pose: None,
-            beat_accent: None,
+            ..Controls::default()
         };
         // Mean frame-to-frame change and spread over time of one joint's rotation.
         let mut run = |rho: f32| {
@@ -586,8 +585,7 @@ mod tests {
         let mut pose = Pose::rest();
         let controls = Controls {
             temperature: 1.0,
-            key_pose: None,
-            beat_accent: None,
+            ..Controls::default()
         };
         let mut track = Vec::new();
         for _ in 0..500 {
@@ -623,8 +621,7 @@ mod tests {
         let mut pose = Pose::rest();
         let controls = Controls {
             temperature: 1.0,
-            key_pose: None,
-            beat_accent: None,
+            ..Controls::default()
         };
         let margin = RANGE_MARGIN * 0.1 + 1e-4;
         let mut sampled = 0;
@@ -664,7 +661,7 @@ mod tests {
                         rotations,
                         frames_to_go: ftg,
                     }),
-                    beat_accent: None,
+                    ..Controls::default()
                 };
                 d.step(&music, &controls, &mut pose);
             }
@@ -705,8 +702,7 @@ mod tests {
         let mut pose = Pose::rest();
         let controls = Controls {
             temperature: 1.0,
-            key_pose: None,
-            beat_accent: None,
+            ..Controls::default()
         };
         for _ in 0..2 * RESTART_AFTER_HELD {
             d.step(&[[0.0; FEATURE_DIM]], &controls, &mut pose);
