@@ -430,6 +430,10 @@ mod tests {
             map(&mut m, knob(9, 0)),
             vec![ControlEvent::TransitionBeats(0.25)]
         );
+        assert_eq!(
+            map(&mut m, knob(12, 127)),
+            vec![ControlEvent::BeatAccent(0.6)]
+        );
     }
 
     #[test]
