@@ -213,6 +213,22 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         crate::dataset::DATASET_VERSION,
         train_names.join(" ")
     );
+    let recipe = format!(
+        "danced train --minutes {} --seed {} --batch {} --sequence {} --lr {} --key-drop {} --input-noise {} --music-drop {}",
+        args.minutes,
+        args.seed,
+        args.batch,
+        args.sequence,
+        args.lr,
+        args.key_drop,
+        args.input_noise,
+        args.music_drop
+    );
+    model.training.recipe = if previous.recipe.is_empty() {
+        recipe
+    } else {
+        format!("{}; then --resume: {recipe}", previous.recipe)
+    };
     let mut trainer = Trainer::new(model)?;
     let mut rng = Rng::new(args.seed.wrapping_add(previous.steps));
     if fresh {
@@ -404,8 +420,13 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
     let times = time_frames(&mut dancer, &song, args.frames.max(1), args.temperature);
     let q = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
     println!(
-        "model {:?}\n{} frames after 200 warm-up: p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per frame (one thread); {} held frames",
+        "model {:?}\ntrained by: {}\n{} frames after 200 warm-up: p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per frame (one thread); {} held frames",
         model.config,
+        if model.training.recipe.is_empty() {
+            "(not recorded)"
+        } else {
+            &model.training.recipe
+        },
         times.len(),
         q(0.5) / 1e3,
         q(0.99) / 1e3,

@@ -68,6 +68,7 @@ fn shipped_model_says_what_it_was_trained_on() {
     let model = daemon::dancer::load_model(None).unwrap();
     let t = &model.training;
     assert!(t.data.contains("tang2018"), "{t:?}");
+    assert!(t.recipe.starts_with("danced train "), "{t:?}");
     assert_eq!(t.dances, 30, "{t:?}");
     assert!(t.frames > 40_000 && t.steps > 1000, "{t:?}");
     // The live constraint of the issue: look-ahead at most 0.25 s.

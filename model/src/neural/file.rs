@@ -84,6 +84,9 @@ pub struct TrainingSummary {
     /// What the model was trained on (data set, split, dances), and under which terms.
     #[serde(default)]
     pub data: String,
+    /// How it was trained: the `danced train` options of the run (and of the runs it resumed).
+    #[serde(default)]
+    pub recipe: String,
 }
 
 /// The metadata block.
