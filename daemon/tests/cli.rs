@@ -1,7 +1,7 @@
 //! The `danced` binary as a user runs it.
 
 mod common;
-use common::{danced, scratch, shared_data, write_wav};
+use common::{danced, scratch, shared_data, succeed, write_wav};
 
 #[test]
 fn analyze_writes_beats_onsets_features_and_plot() {
@@ -9,23 +9,17 @@ fn analyze_writes_beats_onsets_features_and_plot() {
     let wav = dir.join("demo.wav");
     let demo = daemon::demo_track::demo_track(20.0);
     write_wav(&wav, &demo.samples, daemon::demo_track::DEMO_RATE, 2);
-    let out = danced()
-        .args(["analyze", wav.to_str().unwrap(), "--rate", "25"])
-        .arg("--beats-out")
-        .arg(dir.join("b.txt"))
-        .arg("--onsets-out")
-        .arg(dir.join("o.txt"))
-        .arg("--features-out")
-        .arg(dir.join("f.npy"))
-        .arg("--plot")
-        .arg(dir.join("p.png"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
+    let (stdout, _) = succeed(
+        danced()
+            .args(["analyze", wav.to_str().unwrap(), "--rate", "25"])
+            .arg("--beats-out")
+            .arg(dir.join("b.txt"))
+            .arg("--onsets-out")
+            .arg(dir.join("o.txt"))
+            .arg("--features-out")
+            .arg(dir.join("f.npy"))
+            .arg("--plot")
+            .arg(dir.join("p.png")),
     );
     assert!(
         stdout.contains("124.0 BPM")
@@ -72,9 +66,7 @@ fn analyze_writes_beats_onsets_features_and_plot() {
 
 #[test]
 fn analyze_without_a_file_uses_the_built_in_song() {
-    let out = danced().arg("analyze").output().unwrap();
-    assert!(out.status.success());
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let (stdout, _) = succeed(danced().arg("analyze"));
     assert!(stdout.contains("built-in demo song"), "{stdout}");
 }
 
@@ -110,17 +102,12 @@ fn a_fitted_dance_exports_as_bvh_and_scores_against_its_song() {
     };
     let dir = scratch("bvh");
     let out = dir.join("w22.bvh");
-    let run = danced()
-        .args(["bvh", "--dance", "DANCE_W_22", "--data"])
-        .arg(&data)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    succeed(
+        danced()
+            .args(["bvh", "--dance", "DANCE_W_22", "--data"])
+            .arg(&data)
+            .arg("--out")
+            .arg(&out),
     );
     let text = std::fs::read_to_string(&out).unwrap();
     assert!(
@@ -128,18 +115,12 @@ fn a_fitted_dance_exports_as_bvh_and_scores_against_its_song() {
             && text.contains("Frames: 1022")
             && text.contains("Frame Time: 0.04")
     );
-    let run = danced()
-        .arg("metrics")
-        .arg(&out)
-        .arg("--audio")
-        .arg(data.join("tang2018/DANCE_W_22/audio.mp3"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    let (stdout, _) = succeed(
+        danced()
+            .arg("metrics")
+            .arg(&out)
+            .arg("--audio")
+            .arg(data.join("tang2018/DANCE_W_22/audio.mp3")),
     );
     let ba: f64 = stdout
         .lines()
@@ -158,20 +139,15 @@ fn generate_dances_to_a_song_and_writes_bvh() {
     };
     let dir = scratch("generate");
     let out = dir.join("gen.bvh");
-    let run = danced()
-        .arg("generate")
-        .arg("--audio")
-        .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
-        .arg("--out")
-        .arg(&out)
-        .args(["--seconds", "10", "--data"])
-        .arg(&data)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    succeed(
+        danced()
+            .arg("generate")
+            .arg("--audio")
+            .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
+            .arg("--out")
+            .arg(&out)
+            .args(["--seconds", "10", "--data"])
+            .arg(&data),
     );
     let bvh = model::bvh::Bvh::read(&out).unwrap();
     assert_eq!(bvh.frames.len(), 250);
@@ -190,59 +166,48 @@ fn train_writes_a_model_that_generate_and_bench_use() {
     };
     let dir = scratch("train");
     let model = dir.join("tiny.dnn");
-    let run = danced()
-        .args([
-            "train",
-            "--tiny",
-            "--max-steps",
-            "3",
-            "--sequence",
-            "16",
-            "--jobs",
-            "2",
-        ])
-        .arg("--data")
-        .arg(&data)
-        .arg("--out")
-        .arg(&model)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "{stderr}");
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let (stdout, stderr) = succeed(
+        danced()
+            .args([
+                "train",
+                "--tiny",
+                "--max-steps",
+                "3",
+                "--sequence",
+                "16",
+                "--jobs",
+                "2",
+            ])
+            .arg("--data")
+            .arg(&data)
+            .arg("--out")
+            .arg(&model),
+    );
     assert!(stdout.contains("trained 3 steps"), "{stdout}");
     assert!(stderr.contains("seed clip: training dance"), "{stderr}");
     // The model file drives generate (through the streaming sampler) and the bench.
     let out = dir.join("gen.bvh");
-    let run = danced()
-        .arg("generate")
-        .arg("--audio")
-        .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
-        .args(["--seconds", "4", "--keypose", "pose-2@3"])
-        .arg("--model")
-        .arg(&model)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    let (stdout, _) = succeed(
+        danced()
+            .arg("generate")
+            .arg("--audio")
+            .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
+            .args(["--seconds", "4", "--keypose", "pose-2@3"])
+            .arg("--model")
+            .arg(&model)
+            .arg("--out")
+            .arg(&out),
     );
     assert!(stdout.contains("by the neural dancer"), "{stdout}");
     assert!(stdout.contains("key pose pose-2 at 3.00 s"), "{stdout}");
     let bvh = model::bvh::Bvh::read(&out).unwrap();
     assert_eq!(bvh.frames.len(), 100);
     assert!(bvh.frames.iter().flatten().all(|v| v.is_finite()));
-    let run = danced()
-        .args(["bench", "model", "--frames", "50", "--model"])
-        .arg(&model)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(run.status.success(), "{stdout}");
+    let (stdout, _) = succeed(
+        danced()
+            .args(["bench", "model", "--frames", "50", "--model"])
+            .arg(&model),
+    );
     assert!(stdout.contains("p99"), "{stdout}");
     // A model file is for the neural source only.
     let run = danced()
@@ -274,25 +239,20 @@ fn live_run_on_a_file_writes_stats_and_a_bad_config_names_the_key() {
     }
     write_wav(&wav, &samples, rate, 1);
     let stats = dir.join("stats.json");
-    let out = danced()
-        .args(["run", "--input"])
-        .arg(&wav)
-        .args([
-            "--speed",
-            "4",
-            "--duration",
-            "2.5",
-            "--control-port",
-            "0",
-            "--stats-json",
-        ])
-        .arg(&stats)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeed(
+        danced()
+            .args(["run", "--input"])
+            .arg(&wav)
+            .args([
+                "--speed",
+                "4",
+                "--duration",
+                "2.5",
+                "--control-port",
+                "0",
+                "--stats-json",
+            ])
+            .arg(&stats),
     );
     let json = std::fs::read_to_string(&stats).unwrap();
     for key in [
@@ -320,13 +280,8 @@ fn live_run_on_a_file_writes_stats_and_a_bad_config_names_the_key() {
 
 #[test]
 fn devices_and_a_missing_input_fail_cleanly() {
-    let out = danced().arg("devices").output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(!String::from_utf8_lossy(&out.stdout).trim().is_empty());
+    let (stdout, _) = succeed(danced().arg("devices"));
+    assert!(!stdout.trim().is_empty());
     let out = danced()
         .args(["run", "--device", "no-such-device-xyz", "--duration", "1"])
         .output()

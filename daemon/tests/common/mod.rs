@@ -8,6 +8,15 @@ pub fn danced() -> Command {
     Command::new(env!("CARGO_BIN_EXE_danced"))
 }
 
+/// Runs `cmd`, asserts that it succeeded (its stderr in the message), and returns its stdout
+/// and stderr.
+pub fn succeed(cmd: &mut Command) -> (String, String) {
+    let out = cmd.output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "stderr: {stderr}");
+    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
+}
+
 /// `../shared/data` beside the repository, or `None` (with a message) when `needed` is absent.
 pub fn shared_data(needed: &str) -> Option<PathBuf> {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
