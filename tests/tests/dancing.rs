@@ -3,44 +3,19 @@
 
 mod common;
 
-use daemon::demo_track::{DEMO_BPM, DEMO_RATE, demo_track};
-use daemon::offline::{AnalyzeOptions, analyze_samples};
-use model::metrics::{FreezeParams, JointTrack, beat_align, detect_freezes};
+use model::metrics::{FreezeParams, JointTrack, detect_freezes};
 use model::rig::{JOINT_COUNT, Pose, Skeleton};
-use model::source::Controls;
 
-/// Dances `seconds` of the demo song with the shipped dancer at `temperature`; returns the
+/// Dances `seconds` of the demo song with the retrieval dancer at `temperature`; returns the
 /// poses (25 fps) and the song's beats.
 fn dance_to_demo(seconds: f64, temperature: f32, seed: u64) -> (Vec<Pose>, Vec<f64>) {
-    let song = demo_track(seconds);
     let mut dancer = daemon::dancer::open_source(
         daemon::dancer::SourceKind::Retrieval,
         &daemon::dancer::SourceSettings::default(),
         seed,
     )
     .expect("the built-in library loads");
-    let a = analyze_samples(
-        "demo",
-        &song.samples,
-        DEMO_RATE,
-        2,
-        AnalyzeOptions::native(Some(dancer.frame_rate())),
-    )
-    .expect("the demo song analyses");
-    let controls = Controls {
-        temperature,
-        ..Controls::default()
-    };
-    let mut pose = Pose::rest();
-    let poses = a
-        .features
-        .iter()
-        .map(|f| {
-            dancer.step(std::slice::from_ref(&f.values), &controls, &mut pose);
-            pose
-        })
-        .collect();
-    (poses, song.beats)
+    common::dance_to_demo(dancer.as_mut(), seconds, temperature, seed)
 }
 
 #[test]
@@ -78,20 +53,10 @@ fn damaged_library_file_is_named_in_the_error() {
 fn retrieval_dancer_moves_on_the_beat_of_the_demo_song() {
     let (poses, beats) = dance_to_demo(40.0, 0.5, 3);
     assert!(poses.iter().all(Pose::is_finite));
-    let skeleton = Skeleton::default_adult();
-    // Skip the first 5 s: the beat tracker locks within them.
-    let skip = 5 * 25;
-    let positions = skeleton.trajectory(&poses[skip..]);
+    // The first 5 s are skipped: the beat tracker locks within them.
+    let (on, off) = common::beat_align_on_and_off(&poses, &beats);
+    let positions = Skeleton::default_adult().trajectory(&poses[5 * 25..]);
     let track = JointTrack::new(&positions, JOINT_COUNT, 25.0).unwrap();
-    let local: Vec<f64> = beats
-        .iter()
-        .map(|b| b - 5.0)
-        .filter(|b| *b >= 0.0)
-        .collect();
-    let half_beat = 30.0 / DEMO_BPM;
-    let shifted: Vec<f64> = local.iter().map(|b| b + half_beat).collect();
-    let on = beat_align(&track, &local);
-    let off = beat_align(&track, &shifted);
     eprintln!("BeatAlign on the beats {on:.3}, half a beat off {off:.3}");
     assert!(on > off + 0.1, "on {on:.3} vs off {off:.3}");
     let freezes = detect_freezes(&track, FreezeParams::default()).unwrap();

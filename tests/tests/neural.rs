@@ -7,11 +7,7 @@ mod common;
 static ALLOCATOR: daemon::alloc_counter::CountingAllocator =
     daemon::alloc_counter::CountingAllocator;
 
-use daemon::demo_track::{DEMO_BPM, DEMO_RATE, demo_track};
-use daemon::offline::{AnalyzeOptions, analyze_samples};
-use model::metrics::{
-    ContactParams, FreezeParams, JointTrack, beat_align, detect_freezes, foot_skating,
-};
+use model::metrics::{ContactParams, FreezeParams, JointTrack, detect_freezes, foot_skating};
 use model::neural::dancer::NeuralDancer;
 use model::rig::{JOINT_COUNT, Pose, Skeleton};
 use model::source::{Controls, MotionSource};
@@ -29,35 +25,10 @@ fn dance_to_demo_with(
     seed: u64,
     configure: impl FnOnce(&mut NeuralDancer),
 ) -> (Vec<Pose>, u64) {
-    let song = demo_track(seconds);
     let model = daemon::dancer::load_model(None).expect("the built-in model loads");
     let mut dancer: NeuralDancer = daemon::dancer::neural_dancer(&model, seed).unwrap();
     configure(&mut dancer);
-    let a = analyze_samples(
-        "demo",
-        &song.samples,
-        DEMO_RATE,
-        2,
-        AnalyzeOptions::native(Some(dancer.frame_rate())),
-    )
-    .expect("the demo song analyses");
-    let music: Vec<_> = a.features.iter().map(|f| f.values).collect();
-    let look = dancer.lookahead_frames();
-    let controls = Controls {
-        temperature,
-        ..Controls::default()
-    };
-    let mut pose = Pose::rest();
-    let poses = (0..music.len())
-        .map(|i| {
-            dancer.step(
-                &music[i..(i + look + 1).min(music.len())],
-                &controls,
-                &mut pose,
-            );
-            pose
-        })
-        .collect();
+    let (poses, _) = common::dance_to_demo(&mut dancer, seconds, temperature, seed);
     (poses, dancer.bad_frames())
 }
 
@@ -129,30 +100,13 @@ fn temperature_and_seed_shape_the_samples() {
     assert!(differ(&c, &d) > 100, "T = 1 depends on the seed");
 }
 
-/// BeatAlign of `poses` (after the first 5 s, where the tracker locks) on the demo song's
-/// beats and half a beat off them.
-fn beat_align_on_and_off(poses: &[Pose]) -> (f64, f64) {
-    let skip = 5 * 25;
-    let positions = Skeleton::default_adult().trajectory(&poses[skip..]);
-    let track = JointTrack::new(&positions, JOINT_COUNT, 25.0).unwrap();
-    let seconds = poses.len() as f64 / 25.0;
-    let beats: Vec<f64> = demo_track(seconds)
-        .beats
-        .iter()
-        .map(|b| b - 5.0)
-        .filter(|b| *b >= 0.0)
-        .collect();
-    let half_beat = 30.0 / DEMO_BPM;
-    let shifted: Vec<f64> = beats.iter().map(|b| b + half_beat).collect();
-    (beat_align(&track, &beats), beat_align(&track, &shifted))
-}
-
 #[test]
 fn beat_accent_puts_the_moves_on_the_beat() {
     let (accented, _) = dance_to_demo(40.0, 0.5, 3);
-    let (on, off) = beat_align_on_and_off(&accented);
+    let (_, beats) = common::demo_music(40.0, 25.0);
+    let (on, off) = common::beat_align_on_and_off(&accented, &beats);
     let (own, _) = dance_to_demo_with(40.0, 0.5, 3, |d| d.set_beat_accent(0.0));
-    let (own_on, own_off) = beat_align_on_and_off(&own);
+    let (own_on, own_off) = common::beat_align_on_and_off(&own, &beats);
     eprintln!(
         "BeatAlign on / off the beat: accented {on:.3} / {off:.3}, own timing {own_on:.3} / {own_off:.3}"
     );
@@ -190,16 +144,7 @@ fn foot_lock_keeps_planted_feet_from_skating() {
 fn stepping_the_dancer_does_not_allocate() {
     let model = daemon::dancer::load_model(None).unwrap();
     let mut dancer = daemon::dancer::neural_dancer(&model, 5).unwrap();
-    let song = demo_track(12.0);
-    let a = analyze_samples(
-        "demo",
-        &song.samples,
-        DEMO_RATE,
-        2,
-        AnalyzeOptions::native(Some(25.0)),
-    )
-    .unwrap();
-    let music: Vec<_> = a.features.iter().map(|f| f.values).collect();
+    let (music, _) = common::demo_music(12.0, 25.0);
     let look = dancer.lookahead_frames();
     let rotations = Pose::rest().local_rotations;
     let mut pose = Pose::rest();
