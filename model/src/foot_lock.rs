@@ -12,6 +12,7 @@
 use glam::{Quat, Vec3};
 
 use crate::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
+use crate::source::finite_clamp;
 
 /// A toe lower than this above the floor (y = 0) may be planted, metres (the dance metrics'
 /// contact height).
@@ -52,7 +53,7 @@ impl FootLock {
         FootLock {
             skeleton,
             frame_rate,
-            strength: clean_strength(strength),
+            strength: finite_clamp(strength, 0.0, 1.0),
             offset: Vec3::ZERO,
             last_toes: [Vec3::ZERO; 2],
             primed: false,
@@ -68,7 +69,7 @@ impl FootLock {
 
     /// Sets the share of a planted toe's drift taken back (0 turns the lock off).
     pub fn set_strength(&mut self, strength: f32) {
-        self.strength = clean_strength(strength);
+        self.strength = finite_clamp(strength, 0.0, 1.0);
     }
 
     /// Forgets the previous frame and the correction so far.
@@ -108,14 +109,6 @@ impl FootLock {
         }
         self.last_toes = toes;
         self.primed = true;
-    }
-}
-
-fn clean_strength(s: f32) -> f32 {
-    if s.is_finite() {
-        s.clamp(0.0, 1.0)
-    } else {
-        0.0
     }
 }
 

@@ -64,3 +64,8 @@ pub trait MotionSource {
     /// Starts a new performance from scratch, seeding any randomness with `seed`.
     fn reset(&mut self, seed: u64);
 }
+
+/// `x` clamped to `lo..=hi`; a non-finite `x` (a NaN from a controller, say) reads as 0.
+pub(crate) fn finite_clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_finite() { x.clamp(lo, hi) } else { 0.0 }
+}

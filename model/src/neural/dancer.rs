@@ -21,7 +21,7 @@ use crate::neural::rng::Rng;
 use crate::neural::runtime::Runtime;
 use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 use crate::rig::{Pose, Skeleton};
-use crate::source::{Controls, MotionSource};
+use crate::source::{Controls, MotionSource, finite_clamp};
 
 /// A normalised output beyond this many standard deviations counts as exploding.
 pub const EXPLODED_SIGMAS: f32 = 50.0;
@@ -198,11 +198,7 @@ impl NeuralDancer {
     /// Sets the frame-to-frame correlation ρ of the latent noise, in [0, 0.999] (0: a fresh
     /// draw every frame; see [`NOISE_CORRELATION`]). Takes effect at the next frame.
     pub fn set_noise_correlation(&mut self, rho: f32) {
-        self.noise_correlation = if rho.is_finite() {
-            rho.clamp(0.0, 0.999)
-        } else {
-            0.0
-        };
+        self.noise_correlation = finite_clamp(rho, 0.0, 0.999);
     }
 
     /// Sets the share of a planted toe's drift the [`FootLock`] takes back (0: off; default
@@ -316,11 +312,7 @@ impl MotionSource for NeuralDancer {
             key.map(|f| (&self.key[..], f)),
         );
         self.runtime.push(&self.token);
-        let t = if controls.temperature.is_finite() {
-            controls.temperature.max(0.0)
-        } else {
-            0.0
-        };
+        let t = finite_clamp(controls.temperature, 0.0, f32::INFINITY);
         let rho = self.noise_correlation;
         let fresh = (1.0 - rho * rho).sqrt();
         for (z, n) in self.z.iter_mut().zip(self.noise.iter_mut()) {
@@ -415,11 +407,7 @@ impl MotionSource for NeuralDancer {
 
 /// A beat accent depth in [0, 0.9] (non-finite: 0).
 fn clean_accent(depth: f32) -> f32 {
-    if depth.is_finite() {
-        depth.clamp(0.0, 0.9)
-    } else {
-        0.0
-    }
+    finite_clamp(depth, 0.0, 0.9)
 }
 
 #[cfg(test)]
