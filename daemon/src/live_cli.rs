@@ -85,7 +85,8 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         &crate::dancer::SourceSettings {
             model: config.dancer.model.as_deref(),
             library: config.dancer.library.as_deref(),
-            beat_accent: Some(config.dancer.beat_accent),
+            // Live, the accent travels with the controls (set from the configuration at start).
+            beat_accent: None,
         },
         config.dancer.seed,
     )?;
