@@ -289,9 +289,8 @@ pub fn run_set(
     crate::pool::parallel_map(&set.items, jobs, |item| {
         let opts = AnalyzeOptions {
             tracker,
-            model_rate: None,
-            keep_hops: false,
             beat_params,
+            ..AnalyzeOptions::default()
         };
         let r = match analyze_file(&item.audio, opts, &mut |_, _| {}) {
             Ok(a) => score(item, &a),

@@ -34,6 +34,8 @@ struct Cli {
 enum Command {
     /// Train the neural dancer on the tang2018 dances.
     Train(daemon::neural::TrainArgs),
+    /// Train the learned beat activation on songs with exact beats (e.g. rendered ones).
+    TrainBeats(daemon::beat_training::TrainBeatsArgs),
     /// Analyse an audio file with the streaming analysis (beats, onsets, tempo, features).
     Analyze(AnalyzeArgs),
     /// Measure the analysis on the annotated data sets.
@@ -422,6 +424,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Analyze(args) => analyze(args),
         Command::Train(args) => daemon::neural::train(&args),
+        Command::TrainBeats(args) => daemon::beat_training::train_beats(&args),
         Command::Bench {
             what: BenchCommand::Model(args),
         } => daemon::neural::bench_model(&args),
@@ -611,7 +614,7 @@ fn analyze(args: AnalyzeArgs) -> Result<()> {
         tracker: args.beat_tracker.into(),
         model_rate: args.features_out.as_ref().map(|_| args.rate),
         keep_hops: args.plot.is_some(),
-        beat_params: Default::default(),
+        ..AnalyzeOptions::default()
     };
     let name = match &args.audio {
         Some(p) => p.display().to_string(),

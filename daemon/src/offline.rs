@@ -20,6 +20,8 @@ pub struct HopSummary {
     pub time_s: f64,
     /// Onset strength.
     pub onset_strength: f32,
+    /// Learned beat activation in [0, 1].
+    pub beat_activation: f32,
     /// Tempo in BPM (0 when no beat is heard).
     pub tempo_bpm: f64,
     /// Beat phase in [0, 1).
@@ -41,6 +43,11 @@ pub struct FileAnalysis {
     pub features: Vec<FeatureFrame>,
     /// Per-hop summaries (empty unless asked for).
     pub hops: Vec<HopSummary>,
+    /// Per-hop inputs of the learned beat activation, flat `[hops][BEAT_INPUT_DIM]` (empty
+    /// unless asked for).
+    pub beat_inputs: Vec<f32>,
+    /// Time of the first hop, seconds (hops follow at `dsp::hop_rate()`).
+    pub first_hop_s: Option<f64>,
     /// Length of the audio, seconds.
     pub duration_s: f64,
     /// Input sample rate, Hz.
@@ -86,6 +93,8 @@ pub struct AnalyzeOptions {
     pub model_rate: Option<f64>,
     /// Keep per-hop summaries (for plots).
     pub keep_hops: bool,
+    /// Keep per-hop beat activation inputs (for training it).
+    pub keep_beat_inputs: bool,
     /// Tuning of the native beat tracker.
     pub beat_params: dsp::beat::BeatTrackerParams,
 }
@@ -119,14 +128,20 @@ pub enum AnalyzeError {
 struct Collector<'a> {
     result: &'a mut FileAnalysis,
     keep_hops: bool,
+    keep_beat_inputs: bool,
 }
 
 impl AnalysisSink for Collector<'_> {
     fn hop(&mut self, hop: &HopFrame) {
+        self.result.first_hop_s.get_or_insert(hop.time_s);
+        if self.keep_beat_inputs {
+            self.result.beat_inputs.extend_from_slice(hop.beat_input);
+        }
         if self.keep_hops {
             self.result.hops.push(HopSummary {
                 time_s: hop.time_s,
                 onset_strength: hop.onset_strength,
+                beat_activation: hop.beat_activation,
                 tempo_bpm: hop.tempo_bpm,
                 beat_phase: hop.beat_phase,
                 bar_phase: hop.bar_phase,
@@ -244,6 +259,7 @@ fn stream(
         let mut sink = Collector {
             result: &mut result,
             keep_hops: options.keep_hops,
+            keep_beat_inputs: options.keep_beat_inputs,
         };
         for chunk in packet[..n * channels as usize].chunks(block) {
             analyzer.process(chunk, &mut sink);

@@ -1,5 +1,6 @@
-//! `--plot`: one PNG with what a user checks at a glance — onset strength with onsets and beats,
-//! how late each beat was decided, tempo, and bar phase with downbeats.
+//! `--plot`: one PNG with what a user checks at a glance — onset strength and the learned beat
+//! activation with onsets and beats, how late each beat was decided, tempo, and bar phase with
+//! downbeats.
 
 use std::path::Path;
 
@@ -42,7 +43,7 @@ fn draw(a: &FileAnalysis, title: &str, path: &Path) -> Result<(), Box<dyn std::e
         .x_label_area_size(24)
         .y_label_area_size(60)
         .caption(
-            "onset strength · onsets (red) · beats (green)",
+            "onset strength (blue) · beat activation, 0–1 to full height (orange) · onsets (red) · beats (green)",
             ("sans-serif", 16),
         )
         .build_cartesian_2d(0.0..t_end, 0.0..max_s * 1.05)?;
@@ -56,6 +57,12 @@ fn draw(a: &FileAnalysis, title: &str, path: &Path) -> Result<(), Box<dyn std::e
     c.draw_series(LineSeries::new(
         a.hops.iter().map(|h| (h.time_s, h.onset_strength as f64)),
         &BLUE,
+    ))?;
+    c.draw_series(LineSeries::new(
+        a.hops
+            .iter()
+            .map(|h| (h.time_s, h.beat_activation as f64 * max_s)),
+        RGBColor(240, 140, 0).stroke_width(1),
     ))?;
     c.draw_series(
         a.onsets

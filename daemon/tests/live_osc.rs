@@ -456,8 +456,8 @@ fn oscdump_receives_the_native_and_vmc_streams() {
 fn beats_of_a_recorded_song_arrive_near_the_reference_beats() {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
     let (song, reference) = (
-        data.join("tang2018/DANCE_C_2/audio.mp3"),
-        data.join("tang2018-beats/DANCE_C_2.beats"),
+        data.join("tang2018/DANCE_C_4/audio.mp3"),
+        data.join("tang2018-beats/DANCE_C_4.beats"),
     );
     if !song.is_file() || !reference.is_file() {
         eprintln!("skipping: {} not found", song.display());

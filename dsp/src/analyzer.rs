@@ -1,6 +1,7 @@
 //! The whole streaming analysis chain behind one `process` call per audio block.
 
 use crate::beat::{BeatTracker, BeatTrackerParams};
+use crate::beat_activation::{BEAT_INPUT_DIM, BeatActivation, BeatInput, BeatNetEnsemble};
 use crate::chroma::ChromaFilterbank;
 use crate::feature::{FeatureFrame, FeatureFramer};
 use crate::mel::{MEL_BANDS, MEL_FMAX, MEL_FMIN, MelFilterbank};
@@ -68,6 +69,10 @@ pub struct HopFrame<'a> {
     pub onset_strength: f32,
     /// Onset strength in the bass bands.
     pub bass_onset_strength: f32,
+    /// Inputs of the learned beat activation (zeros with a tracker that does not use it).
+    pub beat_input: &'a [f32; BEAT_INPUT_DIM],
+    /// Learned beat activation in [0, 1] (0 with a tracker that does not use it).
+    pub beat_activation: f32,
     /// Chroma, index 0 = C.
     pub chroma: &'a [f32; 12],
     /// Tempo in BPM (0 while no beat is heard).
@@ -141,6 +146,8 @@ pub(crate) struct TrackerOutput {
 /// Native tracker: SuperFlux peak picking and the beat-pointer HMM.
 struct NativeTracker {
     picker: OnsetPeakPicker,
+    input: BeatInput,
+    activation: BeatActivation,
     beats: BeatTracker,
 }
 
@@ -167,6 +174,8 @@ struct Core {
     chroma_fb: ChromaFilterbank,
     chroma: [f32; 12],
     onsets: OnsetDetector,
+    beat_input: [f32; BEAT_INPUT_DIM],
+    beat_activation: f32,
     tracker: Tracker,
     meter: MeterTracker,
     framer: Option<FeatureFramer>,
@@ -192,6 +201,8 @@ impl Analyzer {
         let tracker = match config.tracker {
             BeatTrackerKind::Native => Tracker::Native(Box::new(NativeTracker {
                 picker: OnsetPeakPicker::new(fps),
+                input: BeatInput::new(fps),
+                activation: BeatActivation::new(BeatNetEnsemble::builtin()),
                 beats: BeatTracker::with_params(fps, config.beat_params),
             })),
             #[cfg(feature = "aubio")]
@@ -217,6 +228,8 @@ impl Analyzer {
             chroma_fb: ChromaFilterbank::new(LONG_WINDOW, ANALYSIS_RATE),
             chroma: [0.0; 12],
             onsets: OnsetDetector::new(SHORT_WINDOW, ANALYSIS_RATE),
+            beat_input: [0.0; BEAT_INPUT_DIM],
+            beat_activation: 0.0,
             tracker,
             meter: MeterTracker::new(),
             framer: config.model_rate.map(FeatureFramer::new),
@@ -290,7 +303,9 @@ impl Core {
         let out = match &mut self.tracker {
             Tracker::Native(n) => {
                 let onset = n.picker.process(strength).then_some(0.0);
-                let st = n.beats.process(strength, bass);
+                n.input.process(&self.onsets, &mut self.beat_input);
+                self.beat_activation = n.activation.process(&self.beat_input);
+                let st = n.beats.process(strength, bass, self.beat_activation);
                 TrackerOutput {
                     onset,
                     beat: st.beat_frames_ago,
@@ -333,6 +348,8 @@ impl Core {
             energy_db,
             onset_strength: strength,
             bass_onset_strength: bass,
+            beat_input: &self.beat_input,
+            beat_activation: self.beat_activation,
             chroma: &self.chroma,
             tempo_bpm: out.tempo_bpm,
             tempo_confidence: out.tempo_confidence,

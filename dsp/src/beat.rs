@@ -47,6 +47,11 @@ pub struct BeatTrackerParams {
     pub observation_power: f64,
     /// Extra weight of bass-band onsets (kick drums, bass notes) in the beat observation.
     pub bass_weight: f32,
+    /// Share of the learned beat activation in the observation (0: onset strength only,
+    /// 1: activation only), as a weighted geometric mean of the two likelihood ratios.
+    pub activation_weight: f64,
+    /// Exponent on the activation's likelihood ratio (its activation over its recent mean).
+    pub activation_power: f64,
 }
 
 impl Default for BeatTrackerParams {
@@ -65,6 +70,8 @@ impl Default for BeatTrackerParams {
             lead_frames: 0,
             bass_weight: 6.0,
             observation_power: 0.0,
+            activation_weight: 0.35,
+            activation_power: 1.0,
         }
     }
 }
@@ -95,6 +102,9 @@ impl BeatTrackerParams {
                 "lead_frames" => self.lead_frames = x as usize,
                 "bass_weight" => self.bass_weight = x as f32,
                 "observation_power" => self.observation_power = x,
+                "activation_weight" => self.activation_weight = x.clamp(0.0, 1.0),
+                "activation_power" => self.activation_power = x,
+
                 other => return Err(format!("unknown beat tracker parameter {other:?}")),
             }
         }
@@ -136,6 +146,7 @@ pub struct BeatTracker {
     contrast: f32,
     recent_z: [f32; 3],
     salience: f32,
+    activation_mean: f32,
     salience_pending: bool,
     locked: bool,
     evident_frames: u32,
@@ -201,6 +212,7 @@ impl BeatTracker {
             contrast: 0.0,
             recent_z: [0.0; 3],
             salience: 0.0,
+            activation_mean: 0.0,
             salience_pending: false,
             locked: false,
             evident_frames: 0,
@@ -226,7 +238,24 @@ impl BeatTracker {
     /// Likelihood ratio of "this frame is on a beat" over "it is not", from the onset strength
     /// relative to its recent mean: above-average frames favour beat states, quiet ones count
     /// against them, and the ratio is bounded so one huge attack cannot override the tempo.
-    fn beat_likelihood_ratio(&mut self, strength: f32, bass_strength: f32) -> f64 {
+    fn beat_likelihood_ratio(&mut self, strength: f32, bass_strength: f32, activation: f32) -> f64 {
+        let flux = self.flux_likelihood_ratio(strength, bass_strength);
+        let w = self.params.activation_weight;
+        if w <= 0.0 {
+            return flux;
+        }
+        let a = if activation.is_finite() {
+            activation.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.activation_mean += self.norm_alpha * (a - self.activation_mean);
+        let ratio = ((a + 0.02) / (self.activation_mean + 0.02)) as f64;
+        flux.powf(1.0 - w) * ratio.powf(w * self.params.activation_power)
+    }
+
+    /// The onset-strength part of [`Self::beat_likelihood_ratio`].
+    fn flux_likelihood_ratio(&mut self, strength: f32, bass_strength: f32) -> f64 {
         let clean = |x: f32| if x.is_finite() { x.max(0.0) } else { 0.0 };
         let (full, bass) = (clean(strength), clean(bass_strength));
         // The gate looks at the full-band flux alone: summed over many bands it is nearly
@@ -247,9 +276,10 @@ impl BeatTracker {
         }
     }
 
-    /// Consumes one frame's onset strength (all bands and bass bands); returns the updated state.
-    pub fn process(&mut self, strength: f32, bass_strength: f32) -> BeatState {
-        let p_beat = self.beat_likelihood_ratio(strength, bass_strength);
+    /// Consumes one frame's onset strength (all bands and bass bands) and learned beat
+    /// activation; returns the updated state.
+    pub fn process(&mut self, strength: f32, bass_strength: f32, activation: f32) -> BeatState {
+        let p_beat = self.beat_likelihood_ratio(strength, bass_strength, activation);
         let p_other = 1.0;
         let n = self.intervals.len();
 
@@ -418,7 +448,7 @@ mod tests {
             let mut beats = Vec::new();
             let strengths = click_strengths(bpm, fps, 20.0);
             for (t, &s) in strengths.iter().enumerate() {
-                let st = bt.process(s, 0.0);
+                let st = bt.process(s, 0.0, 0.0);
                 if let Some(ago) = st.beat_frames_ago {
                     beats.push(t as f64 - ago);
                 }
@@ -456,7 +486,7 @@ mod tests {
         let fps = crate::hop_rate();
         let mut bt = BeatTracker::new(fps);
         for _ in 0..(20.0 * fps) as usize {
-            let st = bt.process(0.0, 0.0);
+            let st = bt.process(0.0, 0.0, 0.0);
             assert!(st.beat_frames_ago.is_none() && st.tempo_confidence == 0.0);
         }
         // Stationary noise: the full-band flux is steady (many bands averaged), the few bass
@@ -473,7 +503,7 @@ mod tests {
         for _ in 0..(30.0 * fps) as usize {
             let full = 3.0 * (1.0 + 0.3 * (uniform() - 0.5));
             let bass = 2.0 * uniform();
-            if bt.process(full, bass).beat_frames_ago.is_some() {
+            if bt.process(full, bass, 0.0).beat_frames_ago.is_some() {
                 beats += 1;
             }
         }

@@ -12,6 +12,7 @@ pub mod analyzer;
 #[cfg(feature = "aubio")]
 pub mod aubio_tracker;
 pub mod beat;
+pub mod beat_activation;
 pub mod chroma;
 pub mod error;
 pub mod feature;
@@ -26,6 +27,9 @@ pub use analyzer::{
     AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, HopFrame, OnsetEvent,
 };
 pub use beat::{BeatTracker, BeatTrackerParams};
+pub use beat_activation::{
+    BEAT_INPUT_DIM, BeatActivation, BeatInput, BeatNetEnsemble, BeatNetError, BeatNetWeights,
+};
 pub use chroma::ChromaFilterbank;
 pub use error::DspError;
 pub use feature::{FeatureFrame, FeatureFramer, FeatureLayout};

@@ -9,6 +9,8 @@ pub const FLUX_BANDS: usize = 96;
 const LOG_GAIN: f32 = 500.0;
 /// Highest band centre counted as "low" (kick and bass) in [`OnsetDetector::low_flux`].
 const LOW_BAND_HZ: f32 = 160.0;
+/// Groups of adjacent flux bands summarised for the learned beat activation.
+pub const FLUX_GROUPS: usize = 24;
 
 /// Log-filtered spectral flux with a maximum filter across frequency on the reference frame,
 /// which suppresses vibrato and tremolo while keeping attacks.
@@ -19,6 +21,7 @@ pub struct OnsetDetector {
     low_bands: usize,
     flux: f32,
     low_flux: f32,
+    group_flux: [f32; FLUX_GROUPS],
     primed: bool,
 }
 
@@ -38,6 +41,7 @@ impl OnsetDetector {
             low_bands,
             flux: 0.0,
             low_flux: 0.0,
+            group_flux: [0.0; FLUX_GROUPS],
             primed: false,
         }
     }
@@ -49,6 +53,8 @@ impl OnsetDetector {
             *b = (1.0 + LOG_GAIN * *b).log10();
         }
         let (mut flux, mut low) = (0.0, 0.0);
+        let per_group = FLUX_BANDS / FLUX_GROUPS;
+        self.group_flux = [0.0; FLUX_GROUPS];
         if self.primed {
             let n = self.bands.len();
             for b in 0..n {
@@ -59,6 +65,7 @@ impl OnsetDetector {
                     .fold(f32::MIN, |m, &v| m.max(v));
                 let d = (self.bands[b] - reference).max(0.0);
                 flux += d;
+                self.group_flux[b / per_group] += d;
                 if b < self.low_bands {
                     low += d;
                 }
@@ -79,6 +86,11 @@ impl OnsetDetector {
     /// Onset strength of the last frame in the bass bands only (kick drums, bass notes).
     pub fn low_flux(&self) -> f32 {
         self.low_flux
+    }
+
+    /// Onset strength of the last frame in [`FLUX_GROUPS`] groups of adjacent bands, low to high.
+    pub fn group_flux(&self) -> &[f32; FLUX_GROUPS] {
+        &self.group_flux
     }
 }
 

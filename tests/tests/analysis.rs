@@ -12,8 +12,7 @@ fn options(model_rate: Option<f64>) -> AnalyzeOptions {
     AnalyzeOptions {
         tracker: dsp::BeatTrackerKind::Native,
         model_rate,
-        keep_hops: false,
-        beat_params: Default::default(),
+        ..AnalyzeOptions::default()
     }
 }
 

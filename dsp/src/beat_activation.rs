@@ -1,0 +1,499 @@
+//! Learned causal beat activation: a small dilated causal convolution network (a temporal
+//! convolutional network) that reads grouped onset flux and spectral levels and says, at every
+//! hop, how likely that hop is a beat. It looks at the past only (about 3 s of it), so it runs
+//! live; the beat tracker uses it as a second observation beside the raw onset strength.
+//!
+//! The network is trained with burn by `danced train-beats` on rendered songs with exact beats
+//! (`../shared/tools/synth_beats.py`, seeds from 1000 up); its weights ship inside the binary.
+
+use crate::onset::{FLUX_GROUPS, OnsetDetector};
+
+/// Inputs per hop: the onset flux of each group of bands relative to its recent mean,
+/// `ln(1 + flux / mean)`. Relative flux does not depend on the level or the timbre of a
+/// recording, which keeps a network trained on rendered songs usable on real ones (with the
+/// bands' absolute levels as further inputs it fitted the rendered songs better and real
+/// ballroom recordings worse).
+pub const BEAT_INPUT_DIM: usize = FLUX_GROUPS;
+/// Time constant of the flux average the inputs are taken against, seconds.
+const MEAN_SECONDS: f64 = 3.0;
+/// Floor of the flux average, so silence does not turn faint noise into strong inputs.
+const MEAN_FLOOR: f32 = 1e-2;
+/// Magic bytes of a beat activation weight file.
+const MAGIC: &[u8; 4] = b"DNBA";
+/// Version of the weight file layout.
+const VERSION: u32 = 1;
+
+/// Builds the network's input vector from the onset detector, one hop at a time.
+#[derive(Clone, Debug)]
+pub struct BeatInput {
+    flux_mean: [f32; FLUX_GROUPS],
+    alpha: f32,
+}
+
+impl BeatInput {
+    /// An input builder for hops at `frame_rate` per second.
+    pub fn new(frame_rate: f64) -> Self {
+        Self {
+            flux_mean: [0.0; FLUX_GROUPS],
+            alpha: (1.0 / (MEAN_SECONDS * frame_rate)) as f32,
+        }
+    }
+
+    /// Writes this hop's [`BEAT_INPUT_DIM`] inputs into `out` from the detector's last frame.
+    pub fn process(&mut self, detector: &OnsetDetector, out: &mut [f32; BEAT_INPUT_DIM]) {
+        for ((mean, &f), o) in self
+            .flux_mean
+            .iter_mut()
+            .zip(detector.group_flux())
+            .zip(out.iter_mut())
+        {
+            let f = if f.is_finite() { f.max(0.0) } else { 0.0 };
+            *mean += self.alpha * (f - *mean);
+            *o = (f / (*mean + MEAN_FLOOR)).ln_1p();
+        }
+    }
+}
+
+/// Why a beat activation weight file could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum BeatNetError {
+    /// The bytes do not start with the magic `DNBA`.
+    #[error("not a beat activation weight file (bad magic)")]
+    Magic,
+    /// The file's layout version is not this build's.
+    #[error("beat activation weight file version {0} (this build reads {VERSION})")]
+    Version(u32),
+    /// The file is shorter or longer than its header says, or its header is implausible.
+    #[error("beat activation weight file is malformed: {0}")]
+    Malformed(String),
+}
+
+/// Weights of the beat activation network.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BeatNetWeights {
+    /// Channels of every hidden layer.
+    pub channels: usize,
+    /// Kernel size of the dilated convolutions.
+    pub kernel: usize,
+    /// Dilation of each convolution layer.
+    pub dilations: Vec<usize>,
+    /// Mean of each input over the training data.
+    pub input_mean: Vec<f32>,
+    /// Standard deviation of each input over the training data.
+    pub input_std: Vec<f32>,
+    /// Input projection `[channels][BEAT_INPUT_DIM]`.
+    pub input_weight: Vec<f32>,
+    /// Input projection bias `[channels]`.
+    pub input_bias: Vec<f32>,
+    /// Convolution weights, per layer `[channels][channels][kernel]`.
+    pub conv_weight: Vec<Vec<f32>>,
+    /// Convolution biases, per layer `[channels]`.
+    pub conv_bias: Vec<Vec<f32>>,
+    /// Output projection `[channels]`.
+    pub output_weight: Vec<f32>,
+    /// Output bias.
+    pub output_bias: f32,
+}
+
+impl BeatNetWeights {
+    /// Frames of past the network sees (its receptive field).
+    pub fn receptive_field(&self) -> usize {
+        1 + self
+            .dilations
+            .iter()
+            .map(|d| d * (self.kernel - 1))
+            .sum::<usize>()
+    }
+
+    /// Appends this network's shape and weights (little-endian).
+    fn write_to(&self, b: &mut Vec<u8>) {
+        for v in [
+            BEAT_INPUT_DIM as u32,
+            self.channels as u32,
+            self.kernel as u32,
+            self.dilations.len() as u32,
+        ] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        for &d in &self.dilations {
+            b.extend_from_slice(&(d as u32).to_le_bytes());
+        }
+        let mut put = |xs: &[f32]| {
+            xs.iter()
+                .for_each(|x| b.extend_from_slice(&x.to_le_bytes()))
+        };
+        put(&self.input_mean);
+        put(&self.input_std);
+        put(&self.input_weight);
+        put(&self.input_bias);
+        for (w, bias) in self.conv_weight.iter().zip(&self.conv_bias) {
+            put(w);
+            put(bias);
+        }
+        put(&self.output_weight);
+        put(&[self.output_bias]);
+    }
+
+    /// Reads one network written by [`Self::write_to`] at `*at`; checks every size and value.
+    fn read_from(bytes: &[u8], at: &mut usize) -> Result<Self, BeatNetError> {
+        let u32_at = |at: &mut usize| -> Result<usize, BeatNetError> {
+            let s = bytes
+                .get(*at..*at + 4)
+                .ok_or_else(|| BeatNetError::Malformed("truncated header".into()))?;
+            *at += 4;
+            Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as usize)
+        };
+        let (inputs, channels, kernel, layers) =
+            (u32_at(at)?, u32_at(at)?, u32_at(at)?, u32_at(at)?);
+        if inputs != BEAT_INPUT_DIM {
+            return Err(BeatNetError::Malformed(format!(
+                "{inputs} inputs, this build computes {BEAT_INPUT_DIM}"
+            )));
+        }
+        if !(1..=256).contains(&channels) || !(1..=16).contains(&kernel) || layers > 32 {
+            return Err(BeatNetError::Malformed(format!(
+                "implausible shape: {channels} channels, kernel {kernel}, {layers} layers"
+            )));
+        }
+        let mut dilations = Vec::with_capacity(layers);
+        for _ in 0..layers {
+            let d = u32_at(at)?;
+            if !(1..=1024).contains(&d) {
+                return Err(BeatNetError::Malformed(format!("dilation {d}")));
+            }
+            dilations.push(d);
+        }
+        let mut take = |n: usize| -> Result<Vec<f32>, BeatNetError> {
+            let raw = bytes
+                .get(*at..*at + 4 * n)
+                .ok_or_else(|| BeatNetError::Malformed("truncated weights".into()))?;
+            *at += 4 * n;
+            let v: Vec<f32> = raw
+                .chunks_exact(4)
+                .map(|s| f32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+                .collect();
+            if v.iter().all(|x| x.is_finite()) {
+                Ok(v)
+            } else {
+                Err(BeatNetError::Malformed("non-finite weight".into()))
+            }
+        };
+        let (c, k, i) = (channels, kernel, inputs);
+        let input_mean = take(i)?;
+        let input_std = take(i)?;
+        if input_std.iter().any(|&s| s <= 0.0) {
+            return Err(BeatNetError::Malformed("input std ≤ 0".into()));
+        }
+        let input_weight = take(c * i)?;
+        let input_bias = take(c)?;
+        let (mut conv_weight, mut conv_bias) = (Vec::new(), Vec::new());
+        for _ in 0..layers {
+            conv_weight.push(take(c * c * k)?);
+            conv_bias.push(take(c)?);
+        }
+        let output_weight = take(c)?;
+        let output_bias = take(1)?[0];
+        Ok(Self {
+            channels,
+            kernel,
+            dilations,
+            input_mean,
+            input_std,
+            input_weight,
+            input_bias,
+            conv_weight,
+            conv_bias,
+            output_weight,
+            output_bias,
+        })
+    }
+}
+
+/// Several independently trained networks whose activations are averaged (an ensemble is
+/// steadier on music unlike the training songs than any one of its members).
+#[derive(Clone, Debug, PartialEq)]
+pub struct BeatNetEnsemble {
+    /// The member networks.
+    pub nets: Vec<BeatNetWeights>,
+}
+
+impl BeatNetEnsemble {
+    /// The networks shipped with danced (trained on rendered songs, see the module docs).
+    pub fn builtin() -> Self {
+        Self::from_bytes(include_bytes!("../assets/beat_activation.dnba"))
+            .expect("the shipped beat activation weights parse (checked by a test)")
+    }
+
+    /// Serialises the ensemble (little-endian, versioned).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = Vec::new();
+        b.extend_from_slice(MAGIC);
+        b.extend_from_slice(&VERSION.to_le_bytes());
+        b.extend_from_slice(&(self.nets.len() as u32).to_le_bytes());
+        for net in &self.nets {
+            net.write_to(&mut b);
+        }
+        b
+    }
+
+    /// Parses an ensemble written by [`Self::to_bytes`]; checks every size and value.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, BeatNetError> {
+        if bytes.len() < 4 || &bytes[..4] != MAGIC {
+            return Err(BeatNetError::Magic);
+        }
+        let word = |at: usize| -> Result<u32, BeatNetError> {
+            let s = bytes
+                .get(at..at + 4)
+                .ok_or_else(|| BeatNetError::Malformed("truncated header".into()))?;
+            Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+        };
+        let version = word(4)?;
+        if version != VERSION {
+            return Err(BeatNetError::Version(version));
+        }
+        let count = word(8)? as usize;
+        if !(1..=16).contains(&count) {
+            return Err(BeatNetError::Malformed(format!("{count} networks")));
+        }
+        let mut at = 12;
+        let mut nets = Vec::with_capacity(count);
+        for _ in 0..count {
+            nets.push(BeatNetWeights::read_from(bytes, &mut at)?);
+        }
+        if at != bytes.len() {
+            return Err(BeatNetError::Malformed(format!(
+                "{} bytes after the last network",
+                bytes.len() - at
+            )));
+        }
+        Ok(Self { nets })
+    }
+
+    /// Hops of past the widest member sees.
+    pub fn receptive_field(&self) -> usize {
+        self.nets
+            .iter()
+            .map(BeatNetWeights::receptive_field)
+            .max()
+            .unwrap_or(1)
+    }
+}
+
+/// One dilated causal convolution with its input history.
+#[derive(Clone, Debug)]
+struct CausalLayer {
+    dilation: usize,
+    span: usize,
+    /// The layer's weights reordered `[tap][out][in]`, so each output is a contiguous dot product.
+    taps: Vec<f32>,
+    history: Vec<f32>,
+    pos: usize,
+}
+
+/// One network run one hop at a time.
+#[derive(Clone, Debug)]
+struct StreamingNet {
+    weights: BeatNetWeights,
+    layers: Vec<CausalLayer>,
+    input: Vec<f32>,
+    hidden: Vec<f32>,
+    conv_out: Vec<f32>,
+}
+
+impl StreamingNet {
+    fn new(weights: BeatNetWeights) -> Self {
+        let c = weights.channels;
+        let k = weights.kernel;
+        let layers = weights
+            .dilations
+            .iter()
+            .zip(&weights.conv_weight)
+            .map(|(&d, w)| {
+                let span = (k - 1) * d + 1;
+                let mut taps = vec![0.0; k * c * c];
+                for o in 0..c {
+                    for i in 0..c {
+                        for tap in 0..k {
+                            taps[(tap * c + o) * c + i] = w[(o * c + i) * k + tap];
+                        }
+                    }
+                }
+                CausalLayer {
+                    dilation: d,
+                    span,
+                    taps,
+                    history: vec![0.0; span * c],
+                    pos: 0,
+                }
+            })
+            .collect();
+        Self {
+            layers,
+            input: vec![0.0; BEAT_INPUT_DIM],
+            hidden: vec![0.0; c],
+            conv_out: vec![0.0; c],
+            weights,
+        }
+    }
+
+    fn process(&mut self, input: &[f32; BEAT_INPUT_DIM]) -> f32 {
+        let w = &self.weights;
+        let c = w.channels;
+        let k = w.kernel;
+        for (j, x) in self.input.iter_mut().enumerate() {
+            *x = (input[j] - w.input_mean[j]) / w.input_std[j];
+        }
+        for (o, h) in self.hidden.iter_mut().enumerate() {
+            let row = &w.input_weight[o * BEAT_INPUT_DIM..(o + 1) * BEAT_INPUT_DIM];
+            let z = w.input_bias[o] + row.iter().zip(&self.input).map(|(a, b)| a * b).sum::<f32>();
+            *h = z.max(0.0);
+        }
+        for (l, layer) in self.layers.iter_mut().enumerate() {
+            layer.history[layer.pos * c..(layer.pos + 1) * c].copy_from_slice(&self.hidden);
+            self.conv_out.copy_from_slice(&w.conv_bias[l]);
+            for tap in 0..k {
+                let back = (k - 1 - tap) * layer.dilation;
+                let slot = (layer.pos + layer.span - back) % layer.span;
+                let past = &layer.history[slot * c..(slot + 1) * c];
+                let rows = &layer.taps[tap * c * c..(tap + 1) * c * c];
+                for (out, row) in self.conv_out.iter_mut().zip(rows.chunks_exact(c)) {
+                    *out += row.iter().zip(past).map(|(a, b)| a * b).sum::<f32>();
+                }
+            }
+            self.conv_out.iter_mut().for_each(|z| *z = z.max(0.0));
+            layer.pos = (layer.pos + 1) % layer.span;
+            for (h, y) in self.hidden.iter_mut().zip(&self.conv_out) {
+                *h += y;
+            }
+        }
+        let z = w.output_bias
+            + w.output_weight
+                .iter()
+                .zip(&self.hidden)
+                .map(|(a, b)| a * b)
+                .sum::<f32>();
+        let a = 1.0 / (1.0 + (-z).exp());
+        if a.is_finite() { a } else { 0.0 }
+    }
+}
+
+/// The ensemble run one hop at a time: allocates in [`BeatActivation::new`] only.
+#[derive(Clone, Debug)]
+pub struct BeatActivation {
+    nets: Vec<StreamingNet>,
+}
+
+impl BeatActivation {
+    /// Streaming networks with these weights and an empty (silent) past.
+    pub fn new(ensemble: BeatNetEnsemble) -> Self {
+        Self {
+            nets: ensemble.nets.into_iter().map(StreamingNet::new).collect(),
+        }
+    }
+
+    /// Consumes one hop's inputs; returns the members' mean beat activation in [0, 1].
+    pub fn process(&mut self, input: &[f32; BEAT_INPUT_DIM]) -> f32 {
+        let sum: f32 = self.nets.iter_mut().map(|n| n.process(input)).sum();
+        sum / self.nets.len().max(1) as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One channel, kernel 2, dilation 2: the hidden value is input 0 (its mean 1 and std 2
+    /// removed), and the layer adds relu(0.5·h[t−2] + 1·h[t]).
+    fn tiny() -> BeatNetWeights {
+        let mut input_weight = vec![0.0; BEAT_INPUT_DIM];
+        input_weight[0] = 1.0;
+        BeatNetWeights {
+            channels: 1,
+            kernel: 2,
+            dilations: vec![2],
+            input_mean: vec![1.0; BEAT_INPUT_DIM],
+            input_std: vec![2.0; BEAT_INPUT_DIM],
+            input_weight,
+            input_bias: vec![0.0],
+            conv_weight: vec![vec![0.5, 1.0]],
+            conv_bias: vec![vec![0.0]],
+            output_weight: vec![1.0],
+            output_bias: -1.0,
+        }
+    }
+
+    #[test]
+    fn streaming_network_matches_hand_computation() {
+        let mut net = BeatActivation::new(BeatNetEnsemble { nets: vec![tiny()] });
+        let xs = [3.0f32, 5.0, 1.0, 7.0, 9.0];
+        let h: Vec<f32> = xs.iter().map(|x| ((x - 1.0) / 2.0).max(0.0)).collect();
+        for (t, &x) in xs.iter().enumerate() {
+            let mut input = [0.0; BEAT_INPUT_DIM];
+            input[0] = x;
+            let past = if t >= 2 { h[t - 2] } else { 0.0 };
+            let z = h[t] + (0.5 * past + h[t]).max(0.0) - 1.0;
+            let expected = 1.0 / (1.0 + (-z).exp());
+            let got = net.process(&input);
+            assert!((got - expected).abs() < 1e-6, "t={t}: {got} vs {expected}");
+        }
+        assert_eq!(tiny().receptive_field(), 3);
+    }
+
+    #[test]
+    fn weights_round_trip_and_bad_files_are_named_errors() {
+        let mut other = tiny();
+        other.output_bias = 0.5;
+        let w = BeatNetEnsemble {
+            nets: vec![tiny(), other],
+        };
+        let bytes = w.to_bytes();
+        assert_eq!(BeatNetEnsemble::from_bytes(&bytes).unwrap(), w);
+        assert!(matches!(
+            BeatNetEnsemble::from_bytes(b"XXXX"),
+            Err(BeatNetError::Magic)
+        ));
+        let mut v2 = bytes.clone();
+        v2[4] = 9;
+        assert!(matches!(
+            BeatNetEnsemble::from_bytes(&v2),
+            Err(BeatNetError::Version(9))
+        ));
+        let mut extra = bytes.clone();
+        extra.push(0);
+        assert!(matches!(
+            BeatNetEnsemble::from_bytes(&extra),
+            Err(BeatNetError::Malformed(_))
+        ));
+        for cut in [6, 10, 20, bytes.len() / 2, bytes.len() - 1] {
+            assert!(
+                matches!(
+                    BeatNetEnsemble::from_bytes(&bytes[..cut]),
+                    Err(BeatNetError::Malformed(_))
+                ),
+                "cut at {cut}"
+            );
+        }
+        let mut nan = bytes.clone();
+        let last = nan.len() - 4;
+        nan[last..].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(matches!(
+            BeatNetEnsemble::from_bytes(&nan),
+            Err(BeatNetError::Malformed(_))
+        ));
+    }
+
+    #[test]
+    fn shipped_weights_parse_and_give_finite_activations() {
+        let w = BeatNetEnsemble::builtin();
+        assert!(w.receptive_field() >= 1 && !w.nets.is_empty());
+        let mut net = BeatActivation::new(w);
+        for t in 0..500 {
+            let mut input = [0.0; BEAT_INPUT_DIM];
+            input
+                .iter_mut()
+                .for_each(|x| *x = ((t * 7) % 13) as f32 * 0.3);
+            let a = net.process(&input);
+            assert!(a.is_finite() && (0.0..=1.0).contains(&a), "{a}");
+        }
+    }
+}
