@@ -12,6 +12,9 @@ const OBSERVATION_LAMBDA: usize = 16;
 const LOCK_SECONDS: f64 = 1.0;
 /// Once locked, the gates drop to this fraction of their values.
 const UNLOCK_FACTOR: f32 = 0.75;
+/// Added to the activation and its mean before their ratio, so near-silent stretches (where
+/// both are ~0) give a ratio near 1 instead of amplifying noise.
+const ACTIVATION_FLOOR: f32 = 0.02;
 /// Mean onset strength below which the input counts as silence.
 const SILENCE_FLUX: f32 = 0.05;
 
@@ -104,7 +107,6 @@ impl BeatTrackerParams {
                 "observation_power" => self.observation_power = x,
                 "activation_weight" => self.activation_weight = x.clamp(0.0, 1.0),
                 "activation_power" => self.activation_power = x,
-
                 other => return Err(format!("unknown beat tracker parameter {other:?}")),
             }
         }
@@ -250,7 +252,7 @@ impl BeatTracker {
             0.0
         };
         self.activation_mean += self.norm_alpha * (a - self.activation_mean);
-        let ratio = ((a + 0.02) / (self.activation_mean + 0.02)) as f64;
+        let ratio = ((a + ACTIVATION_FLOOR) / (self.activation_mean + ACTIVATION_FLOOR)) as f64;
         flux.powf(1.0 - w) * ratio.powf(w * self.params.activation_power)
     }
 

@@ -54,6 +54,14 @@ impl BeatInput {
     }
 }
 
+/// The little-endian `u32` at byte `at` of a weight file's header.
+fn read_u32(bytes: &[u8], at: usize) -> Result<u32, BeatNetError> {
+    let s = bytes
+        .get(at..at + 4)
+        .ok_or_else(|| BeatNetError::Malformed("truncated header".into()))?;
+    Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
+}
+
 /// Why a beat activation weight file could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum BeatNetError {
@@ -137,11 +145,9 @@ impl BeatNetWeights {
     /// Reads one network written by [`Self::write_to`] at `*at`; checks every size and value.
     fn read_from(bytes: &[u8], at: &mut usize) -> Result<Self, BeatNetError> {
         let u32_at = |at: &mut usize| -> Result<usize, BeatNetError> {
-            let s = bytes
-                .get(*at..*at + 4)
-                .ok_or_else(|| BeatNetError::Malformed("truncated header".into()))?;
+            let v = read_u32(bytes, *at)?;
             *at += 4;
-            Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as usize)
+            Ok(v as usize)
         };
         let (inputs, channels, kernel, layers) =
             (u32_at(at)?, u32_at(at)?, u32_at(at)?, u32_at(at)?);
@@ -241,17 +247,11 @@ impl BeatNetEnsemble {
         if bytes.len() < 4 || &bytes[..4] != MAGIC {
             return Err(BeatNetError::Magic);
         }
-        let word = |at: usize| -> Result<u32, BeatNetError> {
-            let s = bytes
-                .get(at..at + 4)
-                .ok_or_else(|| BeatNetError::Malformed("truncated header".into()))?;
-            Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-        };
-        let version = word(4)?;
+        let version = read_u32(bytes, 4)?;
         if version != VERSION {
             return Err(BeatNetError::Version(version));
         }
-        let count = word(8)? as usize;
+        let count = read_u32(bytes, 8)? as usize;
         if !(1..=16).contains(&count) {
             return Err(BeatNetError::Malformed(format!("{count} networks")));
         }
