@@ -168,6 +168,24 @@ pub fn input_statistics(songs: &[BeatSong]) -> (Vec<f32>, Vec<f32>) {
     (mean, std)
 }
 
+/// Writes hop-major input rows (`[hops][I]`), each input scaled by its gain and normalised,
+/// into `out` laid out input-major (`[I][out.len() / I]`, the layout burn's `Conv1d` reads);
+/// hops past the rows stay as they are (zero padding).
+fn normalise_channels_first(
+    rows: &[f32],
+    gains: &[f32],
+    mean: &[f32],
+    std: &[f32],
+    out: &mut [f32],
+) {
+    let stride = out.len() / I;
+    for (t, row) in rows.chunks_exact(I).enumerate() {
+        for j in 0..I {
+            out[j * stride + t] = (gains[j] * row[j] - mean[j]) / std[j];
+        }
+    }
+}
+
 /// Cuts a batch of normalised crops: inputs `[b, I, s]` and targets `[b, 1, s]`, flat.
 fn batch(
     songs: &[BeatSong],
@@ -186,13 +204,9 @@ fn batch(
         let gains: Vec<f32> = (0..I)
             .map(|_| (c.gain_jitter * rng.normal()).exp())
             .collect();
-        for t in 0..len {
-            let row = &song.inputs[(start + t) * I..(start + t + 1) * I];
-            for j in 0..I {
-                x[(b * I + j) * s + t] = (gains[j] * row[j] - mean[j]) / std[j];
-            }
-            y[b * s + t] = song.targets[start + t];
-        }
+        let rows = &song.inputs[start * I..(start + len) * I];
+        normalise_channels_first(rows, &gains, mean, std, &mut x[b * I * s..(b + 1) * I * s]);
+        y[b * s..b * s + len].copy_from_slice(&song.targets[start..start + len]);
     }
     (x, y)
 }
@@ -249,11 +263,7 @@ fn validation_loss(w: &BeatNetWeights, valid: &[BeatSong], c: &BeatTrainConfig) 
     for s in valid {
         let t = s.frames();
         let mut x = vec![0.0f32; I * t];
-        for (k, row) in s.inputs.chunks_exact(I).enumerate() {
-            for j in 0..I {
-                x[j * t + k] = (row[j] - w.input_mean[j]) / w.input_std[j];
-            }
-        }
+        normalise_channels_first(&s.inputs, &[1.0; I], &w.input_mean, &w.input_std, &mut x);
         let x = Tensor::from_data(TensorData::new(x, [1, I, t]), &device);
         let y = Tensor::from_data(TensorData::new(s.targets.clone(), [1, 1, t]), &device);
         let l = values(bce(net.forward(x), y))
