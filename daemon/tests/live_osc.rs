@@ -233,7 +233,10 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
         assert!(d < 0.07, "beat at {b:.3} s is {d:.3} s from a click");
     }
 
-    // The key pose is reached at a beat (within one output frame), soon after it was asked.
+    // The key pose is reached at a beat, soon after it was asked. The model hits it on the model
+    // frame nearest the predicted beat (half a model frame off at most) and the sender shows the
+    // closest 60 Hz frame (one output frame, `speed` / 60 s of audio, off at most).
+    let hit_tolerance = 0.5 / model::neural::file::FRAME_RATE + speed / 60.0 + 0.005;
     let bank = daemon::pose_bank::PoseBank::shipped().unwrap();
     let target = bank.get("pose-8").unwrap().rotations;
     let (best, err) = frames
@@ -252,7 +255,10 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
         "key pose: {err:.2} cm at audio {t:.3} s, {to_click:.3} s from a click, {waited:.2} audio s after asking"
     );
     assert!(err < 2.0, "joint error {err:.2} cm at the target");
-    assert!(to_click < 0.04, "reached {to_click:.3} s from a beat");
+    assert!(
+        to_click < hit_tolerance,
+        "reached {to_click:.3} s from a beat (tolerance {hit_tolerance:.3} s)"
+    );
     assert!(waited < 1.5, "reached {waited:.2} s after it was asked");
 
     // VMC: every bone in every frame, unit quaternions.
