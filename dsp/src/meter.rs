@@ -13,6 +13,9 @@ const POSITION_ALPHA: f32 = 0.2;
 const SWITCH_MARGIN: f32 = 1.25;
 /// Frames of bass flux looked back over at a beat.
 const BASS_FRAMES: usize = 4;
+/// Frames after a reported beat whose bass flux still counts for it: the beat is reported
+/// within a frame or two of its onset, and a bass note's flux can peak just after that.
+const BASS_FRAMES_AFTER: u32 = 3;
 
 /// Causal bar tracker driven by beat events and per-frame chroma and bass flux.
 pub struct MeterTracker {
@@ -24,6 +27,7 @@ pub struct MeterTracker {
     mean_change: f32,
     mean_bass: f32,
     pending_bass: f32,
+    frames_since_beat: u32,
     scores: [[f32; 4]; 2],
     beat_count: usize,
     current: (usize, usize),
@@ -49,6 +53,7 @@ impl MeterTracker {
             mean_change: 1e-3,
             mean_bass: 1e-3,
             pending_bass: 0.0,
+            frames_since_beat: u32::MAX,
             scores: [[0.0; 4]; 2],
             beat_count: 0,
             current: (1, 0),
@@ -64,6 +69,10 @@ impl MeterTracker {
         }
         self.chroma_frames += 1;
         self.bass[self.bass_pos] = bass_flux.max(0.0);
+        if self.frames_since_beat < BASS_FRAMES_AFTER {
+            self.pending_bass = self.pending_bass.max(bass_flux.max(0.0));
+        }
+        self.frames_since_beat = self.frames_since_beat.saturating_add(1);
         self.bass_pos = (self.bass_pos + 1) % BASS_FRAMES;
     }
 
@@ -95,6 +104,7 @@ impl MeterTracker {
             }
         }
         self.pending_bass = bass_now;
+        self.frames_since_beat = 0;
         // Wait for a couple of bars before trusting any hypothesis.
         if index >= 8 {
             let (best, best_c) = self.best_hypothesis();
@@ -186,6 +196,44 @@ mod tests {
             out.push(mt.beat());
         }
         out
+    }
+
+    /// No chords, only a bass hit on each downbeat that peaks `late` frames after the tracker
+    /// reported that beat (a bass note's flux can peak after the beat is called).
+    fn run_bass_after(meter: usize, downbeat_offset: usize, late: usize) -> Vec<(usize, usize)> {
+        let mut mt = MeterTracker::new();
+        let mut out = Vec::new();
+        let mut was_down = false;
+        for beat in 0..64usize {
+            for f in 0..40 {
+                let bass = if was_down && f == late { 3.0 } else { 0.2 };
+                mt.frame(&[0.5; 12], bass);
+            }
+            out.push(mt.beat());
+            was_down = (beat + meter - downbeat_offset).is_multiple_of(meter);
+        }
+        out
+    }
+
+    #[test]
+    fn a_bass_hit_just_after_the_reported_beat_marks_the_downbeat() {
+        for meter in [3, 4] {
+            for offset in 0..meter {
+                let out = run_bass_after(meter, offset, 1);
+                for (beat, &(in_bar, per_bar)) in out.iter().enumerate().skip(32) {
+                    assert_eq!(per_bar, meter, "meter {meter} offset {offset}");
+                    let expected = (beat + meter - offset) % meter + 1;
+                    assert_eq!(
+                        in_bar, expected,
+                        "meter {meter} offset {offset} beat {beat}"
+                    );
+                }
+            }
+        }
+        // Far after the beat (half a beat), the hit no longer counts for it: no meter is heard
+        // and the count keeps its 4/4 default.
+        let out = run_bass_after(3, 0, 20);
+        assert!(out.iter().skip(32).all(|&(_, per_bar)| per_bar == 4));
     }
 
     #[test]
