@@ -15,6 +15,10 @@ const UNLOCK_FACTOR: f32 = 0.75;
 /// Added to the activation and its mean before their ratio, so near-silent stretches (where
 /// both are ~0) give a ratio near 1 instead of amplifying noise.
 const ACTIVATION_FLOOR: f32 = 0.02;
+/// Share of a beat's offset from the predicted grid that moves the reported beat.
+const BEAT_SMOOTHING_GAIN: f64 = 0.5;
+/// Beats further than this share of an interval from the predicted grid restart the grid.
+const BEAT_SMOOTHING_WINDOW: f64 = 0.1;
 /// Mean onset strength below which the input counts as silence.
 const SILENCE_FLUX: f32 = 0.05;
 
@@ -28,6 +32,10 @@ pub struct BeatTrackerParams {
     pub max_bpm: f64,
     /// How sharply the tempo may change between beats (Krebs et al. use 100).
     pub transition_lambda: f64,
+    /// When above 0, the tempo at which `transition_lambda` applies as given; at other tempos it
+    /// scales with the beat interval, so changing the interval by one frame costs the same at
+    /// every tempo (0: the ratio cost of Krebs et al. at every tempo).
+    pub transition_ref_bpm: f64,
     /// Slope of the log likelihood ratio of a beat against relative onset strength.
     pub observation_beta: f64,
     /// Onset strength relative to its mean above which a frame is no more beat-like.
@@ -63,6 +71,7 @@ impl Default for BeatTrackerParams {
             min_bpm: 65.0,
             max_bpm: 215.0,
             transition_lambda: 100.0,
+            transition_ref_bpm: 150.0,
             observation_beta: 0.8,
             max_relative_strength: 30.0,
             norm_seconds: 3.0,
@@ -95,6 +104,7 @@ impl BeatTrackerParams {
                 "min_bpm" => self.min_bpm = x.clamp(20.0, 300.0),
                 "max_bpm" => self.max_bpm = x.clamp(20.0, 400.0),
                 "transition_lambda" => self.transition_lambda = x,
+                "transition_ref_bpm" => self.transition_ref_bpm = x,
                 "observation_beta" => self.observation_beta = x,
                 "max_relative_strength" => self.max_relative_strength = x as f32,
                 "norm_seconds" => self.norm_seconds = x,
@@ -157,6 +167,8 @@ pub struct BeatTracker {
     last_phase: f64,
     interval: f64,
     frames_since_beat: f64,
+    frame: u64,
+    last_beat: Option<f64>,
     state: BeatState,
 }
 
@@ -185,6 +197,15 @@ impl BeatTracker {
         let mut transition = vec![0.0; n * n];
         for (j, &from) in intervals.iter().enumerate() {
             let row = &mut transition[j * n..(j + 1) * n];
+            // Intervals are whole frames, so a tempo between two of them is held by alternating
+            // neighbours, and the phase is corrected by one-frame steps. Under a pure ratio
+            // cost those steps are dearer at fast tempos (short intervals) than at slow ones.
+            let lambda = if params.transition_ref_bpm > 0.0 {
+                let ref_interval = 60.0 * frame_rate / params.transition_ref_bpm;
+                params.transition_lambda * from as f64 / ref_interval
+            } else {
+                params.transition_lambda
+            };
             for (i, &to) in intervals.iter().enumerate() {
                 let ratio = to as f64 / from as f64;
                 let bpm = 60.0 * frame_rate / to as f64;
@@ -194,7 +215,7 @@ impl BeatTracker {
                 } else {
                     1.0
                 };
-                row[i] = prior * (-params.transition_lambda * (ratio - 1.0).abs()).exp();
+                row[i] = prior * (-lambda * (ratio - 1.0).abs()).exp();
             }
             let sum: f64 = row.iter().sum();
             row.iter_mut().for_each(|v| *v /= sum);
@@ -223,6 +244,8 @@ impl BeatTracker {
             last_phase: 0.0,
             interval: 1.0,
             frames_since_beat: 1e9,
+            frame: 0,
+            last_beat: None,
             state: BeatState::default(),
         }
     }
@@ -394,9 +417,13 @@ impl BeatTracker {
         }
         if beat_due && locked {
             let ago = pos as f64 - if pos + lead >= iv { iv as f64 } else { 0.0 };
+            let ago = self.smooth_beat(ago, interval);
             beat_frames_ago = Some(ago);
             self.frames_since_beat = ago;
+        } else if !locked {
+            self.last_beat = None;
         }
+        self.frame += 1;
         self.last_phase = shifted;
         self.state = BeatState {
             tempo_bpm: if locked {
@@ -419,6 +446,23 @@ impl BeatTracker {
             locked,
         };
         self.state
+    }
+
+    /// Moves a beat found `ago` frames back towards where the previous beat and the fractional
+    /// interval put it. The state space holds whole-frame intervals only, so a tempo between two
+    /// of them is followed by alternating neighbours and beats land up to a few frames either
+    /// side of the true grid; the fractional interval knows better.
+    fn smooth_beat(&mut self, ago: f64, interval: f64) -> f64 {
+        let found = self.frame as f64 - ago;
+        let beat = match self.last_beat {
+            Some(last) if (found - last - interval).abs() <= BEAT_SMOOTHING_WINDOW * interval => {
+                let predicted = last + interval;
+                predicted + BEAT_SMOOTHING_GAIN * (found - predicted)
+            }
+            _ => found,
+        };
+        self.last_beat = Some(beat);
+        self.frame as f64 - beat
     }
 
     /// Onset contrast: mean absolute deviation of the onset strength over its mean (the gate).
@@ -481,6 +525,78 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_one_frame_tempo_step_costs_the_same_at_every_tempo() {
+        let fps = crate::hop_rate();
+        let params = BeatTrackerParams {
+            prior_octaves: 0.0,
+            ..BeatTrackerParams::default()
+        };
+        let step_ratio = |params: BeatTrackerParams, bpm: f64| {
+            let bt = BeatTracker::with_params(fps, params);
+            let n = bt.intervals.len();
+            let j = bt
+                .intervals
+                .iter()
+                .position(|&iv| iv as f64 >= 60.0 * fps / bpm)
+                .unwrap();
+            (
+                bt.transition[j * n + j + 1] / bt.transition[j * n + j],
+                bt.intervals[j],
+            )
+        };
+        let ref_interval = 60.0 * fps / params.transition_ref_bpm;
+        let expected = (-params.transition_lambda / ref_interval).exp();
+        for bpm in [70.0, 87.0, 150.0, 200.0] {
+            let (r, _) = step_ratio(params, bpm);
+            assert!(
+                (r / expected - 1.0).abs() < 1e-9,
+                "{bpm} BPM: {r} vs {expected}"
+            );
+        }
+        // Without the reference tempo the cost is the ratio's (Krebs et al.): a one-frame step
+        // is dearer at fast tempos.
+        let ratio_cost = BeatTrackerParams {
+            transition_ref_bpm: 0.0,
+            ..params
+        };
+        for bpm in [70.0, 200.0] {
+            let (r, iv) = step_ratio(ratio_cost, bpm);
+            let expected = (-ratio_cost.transition_lambda / iv as f64).exp();
+            assert!(
+                (r / expected - 1.0).abs() < 1e-9,
+                "{bpm} BPM: {r} vs {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn beats_found_on_whole_frames_are_pulled_onto_the_fractional_grid() {
+        let mut bt = BeatTracker::new(crate::hop_rate());
+        let interval = 50.4;
+        let mut worst_found: f64 = 0.0;
+        let mut worst_reported: f64 = 0.0;
+        for k in 0..40 {
+            let truth = 100.0 + k as f64 * interval;
+            // The state space finds each beat on a whole frame, alternately early and late.
+            let found = (truth + if k % 2 == 0 { 1.0 } else { -1.0 }).round();
+            bt.frame = found as u64;
+            let reported = bt.frame as f64 - bt.smooth_beat(0.0, interval);
+            if k >= 10 {
+                worst_found = worst_found.max((found - truth).abs());
+                worst_reported = worst_reported.max((reported - truth).abs());
+            }
+        }
+        assert!(worst_found >= 1.0, "the constructed beats are off the grid");
+        assert!(
+            worst_reported <= 0.5,
+            "reported beats stray {worst_reported} frames from the grid (found: {worst_found})"
+        );
+        // A beat far off the prediction (a tempo or phase jump) is taken as found.
+        bt.frame += 70;
+        assert_eq!(bt.smooth_beat(0.0, interval), 0.0);
     }
 
     #[test]
