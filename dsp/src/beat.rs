@@ -137,7 +137,7 @@ pub struct BeatState {
     /// Frames until the next predicted beat.
     pub frames_to_next_beat: f64,
     /// Frames since the beat reported on this frame, when one is (`Some(0.3)`: the beat was 0.3
-    /// frames before this frame's time).
+    /// frames before this frame's time; negative when the tempo grid puts it a little after).
     pub beat_frames_ago: Option<f64>,
     /// Whether the tracker currently hears a beat at all (periodic evidence over silence/noise).
     pub locked: bool,
