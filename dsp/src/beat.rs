@@ -167,8 +167,7 @@ pub struct BeatTracker {
     last_phase: f64,
     interval: f64,
     frames_since_beat: f64,
-    frame: u64,
-    last_beat: Option<f64>,
+    on_grid: bool,
     state: BeatState,
 }
 
@@ -244,8 +243,7 @@ impl BeatTracker {
             last_phase: 0.0,
             interval: 1.0,
             frames_since_beat: 1e9,
-            frame: 0,
-            last_beat: None,
+            on_grid: false,
             state: BeatState::default(),
         }
     }
@@ -421,9 +419,8 @@ impl BeatTracker {
             beat_frames_ago = Some(ago);
             self.frames_since_beat = ago;
         } else if !locked {
-            self.last_beat = None;
+            self.on_grid = false;
         }
-        self.frame += 1;
         self.last_phase = shifted;
         self.state = BeatState {
             tempo_bpm: if locked {
@@ -453,16 +450,16 @@ impl BeatTracker {
     /// of them is followed by alternating neighbours and beats land up to a few frames either
     /// side of the true grid; the fractional interval knows better.
     fn smooth_beat(&mut self, ago: f64, interval: f64) -> f64 {
-        let found = self.frame as f64 - ago;
-        let beat = match self.last_beat {
-            Some(last) if (found - last - interval).abs() <= BEAT_SMOOTHING_WINDOW * interval => {
-                let predicted = last + interval;
-                predicted + BEAT_SMOOTHING_GAIN * (found - predicted)
-            }
-            _ => found,
-        };
-        self.last_beat = Some(beat);
-        self.frame as f64 - beat
+        // The previous reported beat is `frames_since_beat` back; the found beat, `gap` after it.
+        let gap = self.frames_since_beat - ago;
+        let off_grid = gap - interval;
+        let on_grid = self.on_grid && off_grid.abs() <= BEAT_SMOOTHING_WINDOW * interval;
+        self.on_grid = true;
+        if on_grid {
+            self.frames_since_beat - interval - BEAT_SMOOTHING_GAIN * off_grid
+        } else {
+            ago
+        }
     }
 
     /// Onset contrast: mean absolute deviation of the onset strength over its mean (the gate).
@@ -578,12 +575,15 @@ mod tests {
         let interval = 50.4;
         let mut worst_found: f64 = 0.0;
         let mut worst_reported: f64 = 0.0;
+        let mut last_reported = 0.0;
         for k in 0..40 {
             let truth = 100.0 + k as f64 * interval;
             // The state space finds each beat on a whole frame, alternately early and late.
             let found = (truth + if k % 2 == 0 { 1.0 } else { -1.0 }).round();
-            bt.frame = found as u64;
-            let reported = bt.frame as f64 - bt.smooth_beat(0.0, interval);
+            bt.frames_since_beat = found - last_reported;
+            let ago = bt.smooth_beat(0.0, interval);
+            let reported = found - ago;
+            last_reported = reported;
             if k >= 10 {
                 worst_found = worst_found.max((found - truth).abs());
                 worst_reported = worst_reported.max((reported - truth).abs());
@@ -595,7 +595,7 @@ mod tests {
             "reported beats stray {worst_reported} frames from the grid (found: {worst_found})"
         );
         // A beat far off the prediction (a tempo or phase jump) is taken as found.
-        bt.frame += 70;
+        bt.frames_since_beat = 70.0;
         assert_eq!(bt.smooth_beat(0.0, interval), 0.0);
     }
 
