@@ -1,23 +1,37 @@
-//! A counting global allocator for the `danced` binary (and tests): counts allocations made
-//! while the current thread is inside a real-time callback ([`in_callback`]), so the live stats
-//! can prove the audio path allocates nothing.
+//! A counting global allocator for the `danced` binary (and tests): counts allocations and
+//! frees made while the current thread runs real-time code, per real-time thread
+//! ([`RtThread`]), so the live stats can prove every real-time loop allocates nothing.
 //!
 //! Install it with `#[global_allocator] static A: CountingAllocator = CountingAllocator;`.
-//! Without it installed, [`callback_allocations`] stays 0 and [`is_installed`] is false.
+//! Without it installed, the counts stay 0 and [`is_installed`] is false.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-static CALLBACK_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+/// The real-time threads of the live pipeline, each counted on its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RtThread {
+    /// The audio input: the cpal callback, or the replay thread's ring writes.
+    Capture = 0,
+    /// The analysis thread.
+    Analysis = 1,
+    /// The motion thread.
+    Motion = 2,
+    /// The sender thread.
+    Sender = 3,
+}
+
+const NOT_COUNTED: u8 = u8::MAX;
+static COUNTS: [AtomicU64; 4] = [const { AtomicU64::new(0) }; 4];
 static INSTALLED: AtomicBool = AtomicBool::new(false);
 
 thread_local! {
-    // `const` init: no lazy allocation the first time the flag is touched inside a callback.
-    static IN_CALLBACK: Cell<bool> = const { Cell::new(false) };
+    // `const` init: no lazy allocation the first time the flag is touched on a real-time path.
+    static COUNTING: Cell<u8> = const { Cell::new(NOT_COUNTED) };
 }
 
-/// The system allocator, counting calls made inside [`in_callback`].
+/// The system allocator, counting calls made inside [`counted`] or under a [`CountGuard`].
 pub struct CountingAllocator;
 
 unsafe impl GlobalAlloc for CountingAllocator {
@@ -42,23 +56,70 @@ unsafe impl GlobalAlloc for CountingAllocator {
 #[inline]
 fn count() {
     // try_with: during thread teardown the TLS slot may be gone; those frees are not ours.
-    if IN_CALLBACK.try_with(Cell::get).unwrap_or(false) {
-        CALLBACK_ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    let role = COUNTING.try_with(Cell::get).unwrap_or(NOT_COUNTED);
+    if let Some(c) = COUNTS.get(usize::from(role)) {
+        c.fetch_add(1, Ordering::Relaxed);
     }
 }
 
-/// Runs `f` as real-time callback code: every allocation (or free) it makes is counted.
+/// Runs `f` as real-time code of `thread`: every allocation (or free) it makes is counted.
 #[inline]
-pub fn in_callback<R>(f: impl FnOnce() -> R) -> R {
-    let _ = IN_CALLBACK.try_with(|c| c.set(true));
+pub fn counted<R>(thread: RtThread, f: impl FnOnce() -> R) -> R {
+    let before = COUNTING.try_with(|c| c.replace(thread as u8)).ok();
     let r = f();
-    let _ = IN_CALLBACK.try_with(|c| c.set(false));
+    if let Some(b) = before {
+        let _ = COUNTING.try_with(|c| c.set(b));
+    }
     r
 }
 
-/// Allocations (and frees) counted inside callbacks since the process started.
+/// Runs `f` as the audio callback's code (counted as [`RtThread::Capture`]).
+#[inline]
+pub fn in_callback<R>(f: impl FnOnce() -> R) -> R {
+    counted(RtThread::Capture, f)
+}
+
+/// Runs `f` uncounted inside a counted loop: set-up that a loop redoes on rare events (a new
+/// audio format rebuilds the analyzer), which is allowed to allocate.
+#[inline]
+pub fn uncounted<R>(f: impl FnOnce() -> R) -> R {
+    let before = COUNTING.try_with(|c| c.replace(NOT_COUNTED)).ok();
+    let r = f();
+    if let Some(b) = before {
+        let _ = COUNTING.try_with(|c| c.set(b));
+    }
+    r
+}
+
+/// Counts this thread's allocations as `thread`'s until dropped (a real-time loop's body).
+pub struct CountGuard {
+    before: u8,
+}
+
+impl CountGuard {
+    /// Starts counting the current thread as `thread`.
+    pub fn new(thread: RtThread) -> Self {
+        let before = COUNTING
+            .try_with(|c| c.replace(thread as u8))
+            .unwrap_or(NOT_COUNTED);
+        Self { before }
+    }
+}
+
+impl Drop for CountGuard {
+    fn drop(&mut self) {
+        let _ = COUNTING.try_with(|c| c.set(self.before));
+    }
+}
+
+/// Allocations (and frees) counted for `thread` since the process started.
+pub fn allocations(thread: RtThread) -> u64 {
+    COUNTS[thread as usize].load(Ordering::Relaxed)
+}
+
+/// Allocations counted inside the audio callback since the process started.
 pub fn callback_allocations() -> u64 {
-    CALLBACK_ALLOCATIONS.load(Ordering::Relaxed)
+    allocations(RtThread::Capture)
 }
 
 /// Declares that the counting allocator is the global allocator (call once from `main`).
@@ -66,7 +127,7 @@ pub fn mark_installed() {
     INSTALLED.store(true, Ordering::Relaxed);
 }
 
-/// Whether [`mark_installed`] was called, i.e. whether [`callback_allocations`] means anything.
+/// Whether [`mark_installed`] was called, i.e. whether the counts mean anything.
 pub fn is_installed() -> bool {
     INSTALLED.load(Ordering::Relaxed)
 }

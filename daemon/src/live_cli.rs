@@ -14,7 +14,7 @@ use crate::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettin
 use crate::live::replay::{self, ReplayAudio, ReplaySettings};
 use crate::live::stats::StatsReport;
 use crate::live::status::StatusPrinter;
-use crate::live::wire::ControlEvent;
+use crate::live::control_queue::ControlHub;
 
 /// Where the audio comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -69,6 +69,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             let (h, desc) = capture::spawn(
                 CaptureSettings {
                     device: device.clone(),
+                    channels: config.audio.channels.clone(),
                 },
                 writer,
                 &ctx,
@@ -96,9 +97,8 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     };
     let sink = OscSink::from_config(config)?;
     let targets = sink.describe();
-    // Bounded: a flood of control packets must not grow memory; extra events are dropped.
-    let (control_tx, control_rx) = crossbeam_channel::bounded::<ControlEvent>(1024);
-    let controls = ControlInputs::start(config, control_tx, ctx.stop.clone())?;
+    let mut hub = ControlHub::new(&poses, ctx.stats.clone());
+    let controls = ControlInputs::start(config, &mut hub, ctx.stop.clone())?;
     let settings = PipelineSettings {
         rate_hz: config.output.rate_hz,
         speed: if matches!(audio, AudioSource::Capture(_)) {
@@ -119,8 +119,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         PipelineParts {
             source,
             sink: Box::new(sink),
-            controls: control_rx,
-            poses: Box::new(poses),
+            controls: hub,
         },
         reader,
     )?;
@@ -174,6 +173,8 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     report.osc_control_ignored = counters.osc_ignored.load(Ordering::Relaxed);
     report.midi_events = counters.midi_events.load(Ordering::Relaxed);
     report.midi_bytes_dropped = counters.midi_dropped.load(Ordering::Relaxed);
+    report.midi_skipped = counters.midi_skipped.load(Ordering::Relaxed);
+    report.midi_queue_full = counters.midi_queue_full.load(Ordering::Relaxed);
     for h in [replay_handle, capture_handle].into_iter().flatten() {
         if h.join().is_err() {
             bail!("the audio input thread panicked");

@@ -674,6 +674,11 @@ impl MotionSource for RetrievalDancer {
         self.last_raw = Pose::rest();
         self.key_active = false;
     }
+
+    fn reseed(&mut self, seed: u64) {
+        // Only the next clip choices change; the clip playing and its blend carry on.
+        self.rng = Rng::new(seed);
+    }
 }
 
 #[cfg(test)]

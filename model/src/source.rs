@@ -63,6 +63,11 @@ pub trait MotionSource {
 
     /// Starts a new performance from scratch, seeding any randomness with `seed`.
     fn reset(&mut self, seed: u64);
+
+    /// Changes the style seed mid-performance: the randomness restarts from `seed` while the
+    /// dance goes on from where the dancer stands (no restart, no jump); never allocates and
+    /// costs no more than a step, so it can run on the real-time thread between two steps.
+    fn reseed(&mut self, seed: u64);
 }
 
 /// `x` clamped to `lo..=hi`; a non-finite `x` (a NaN from a controller, say) reads as 0.

@@ -22,6 +22,13 @@ pub const TEMPO_HINT_RANGE: (f32, f32) = (30.0, 300.0);
 /// Range a beat accent depth is clamped to.
 pub const BEAT_ACCENT_RANGE: (f32, f32) = (0.0, 0.9);
 
+/// Transition lengths into key poses, beats: above the lower bound (0 is no transition at
+/// all), up to the upper one.
+pub const TRANSITION_BEATS_RANGE: (f32, f32) = (0.0, MAX_QUANTIZE_BEATS as f32);
+
+// These ranges are the only definition: the OSC parser, the MIDI map, the daemon's
+// configuration and its control path all read them.
+
 /// When a key pose should be reached.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
 #[serde(try_from = "String")]
@@ -233,7 +240,7 @@ impl ControlParser {
             }
             "/transition" => {
                 let beats = one_float(args)?;
-                if beats <= 0.0 {
+                if !(beats > TRANSITION_BEATS_RANGE.0 && beats <= TRANSITION_BEATS_RANGE.1) {
                     return Err(Reject::BadArguments);
                 }
                 ControlEvent::TransitionBeats(beats)

@@ -6,6 +6,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use crossbeam_channel::{Receiver, unbounded};
+use daemon::live::control_queue::ControlHub;
 use daemon::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
 use daemon::live::replay::{self, ReplayAudio, ReplaySettings};
 use daemon::live::sink::{ChannelSink, MemoryPoseBank, SinkItem};
@@ -73,6 +74,7 @@ impl MotionSource for EchoSource {
         self.steps += 1;
     }
     fn reset(&mut self, _seed: u64) {}
+    fn reseed(&mut self, _seed: u64) {}
 }
 
 struct Run {
@@ -97,10 +99,12 @@ fn run_until(
     let ctx = LiveContext::new();
     let (writer, reader) = ctx.ring();
     let (tx, rx): (_, Receiver<SinkItem>) = unbounded();
-    let (ctx_tx, ctx_rx) = unbounded();
-    let seen = Arc::new(Mutex::new(Vec::new()));
+    // Preallocated: the echo dancer records on the motion thread, whose allocations count.
+    let seen = Arc::new(Mutex::new(Vec::with_capacity(10_000)));
     let mut bank = MemoryPoseBank::new();
     bank.insert("up", [Quat::from_rotation_x(0.3); JOINT_COUNT]);
+    let mut hub = ControlHub::new(&bank, ctx.stats.clone());
+    let mut ctx_tx = hub.sender();
     let pipeline = Pipeline::start(
         &ctx,
         PipelineSettings {
@@ -114,8 +118,7 @@ fn run_until(
                 seen: seen.clone(),
             }),
             sink: Box::new(ChannelSink::new(tx)),
-            controls: ctx_rx,
-            poses: Box::new(bank),
+            controls: hub,
         },
         reader,
     )
@@ -142,7 +145,8 @@ fn run_until(
         let t = started.elapsed().as_secs_f64();
         pending.retain(|(at, c)| {
             if *at <= t {
-                ctx_tx.send(c.clone()).unwrap();
+                // Refusals are counted in the report, which the tests check.
+                let _ = ctx_tx.send(c.clone());
                 false
             } else {
                 true
@@ -290,8 +294,12 @@ fn fast_replay_frames_beats_and_controls() {
 fn real_time_run_has_no_drops_and_no_callback_allocations() {
     let r = run(3.0, 1.0, Vec::new());
     assert_eq!(r.report.drops, 0);
-    assert_eq!(r.report.callback_allocations, 0);
-    assert!(r.report.allocation_counting || !daemon::alloc_counter::is_installed());
+    // This file's allocator counts; the capture, analysis and motion loops allocate nothing
+    // (the test sink clones every frame on the sender thread: `tests/realtime.rs` proves the
+    // sender with the real OSC outputs).
+    let a = r.report.allocations;
+    assert_eq!((a.capture, a.analysis, a.motion), (0, 0, 0), "{a:?}");
+    assert!(r.report.model_frames > 50);
     assert!(
         r.report.frames_sent > 120,
         "{} frames",

@@ -3,18 +3,19 @@
 //! thread and analysis events to the sender. When no audio arrives for a while (no device,
 //! end of file) it analyses silence on its own clock so the dancer keeps moving.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::sync::atomic::Ordering;
+use std::thread::Thread;
+use std::time::Duration;
 
-use crossbeam_channel::Sender;
 use dsp::feature::FEATURE_DIM;
 use dsp::{AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, FeatureFrame, HopFrame, OnsetEvent};
 
+use super::pipeline::LiveContext;
 use super::ring::{BlockMarker, RingReader};
 use super::stats::Stats;
-use super::timeline::{Anchor, Timeline};
+use super::timeline::Anchor;
 use super::wire::AnalysisEvent;
+use crate::alloc_counter::{CountGuard, RtThread, uncounted};
 
 /// The beat grid as known at one moment, for quantising controls.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -46,6 +47,8 @@ pub struct FeatureMsg {
 
 /// Frames of silence analysed per step while no audio arrives.
 const SILENCE_BLOCK: usize = 256;
+/// Samples of the preallocated silence buffer (256 frames of 32 channels).
+const SILENCE_SAMPLES: usize = SILENCE_BLOCK * 32;
 /// Format assumed for silence before any audio has been seen.
 const DEFAULT_RATE: u32 = 48_000;
 /// Hops between Tempo/Energy/Chroma events (86 hops/s → ~9.6 Hz).
@@ -60,9 +63,20 @@ pub struct AnalysisSettings {
     pub silence_after_s: f64,
 }
 
+/// The analysis thread's ends of its queues.
+pub struct AnalysisQueues {
+    /// Feature frames to the motion thread.
+    pub features: rtrb::Producer<FeatureMsg>,
+    /// Analysis events to the sender thread.
+    pub events: rtrb::Producer<AnalysisEvent>,
+    /// The audio clock (one anchor per block) to the sender thread.
+    pub anchors: rtrb::Producer<Anchor>,
+    /// The motion thread, woken after each feature frame.
+    pub motion_thread: Thread,
+}
+
 struct Out<'a> {
-    features: &'a Sender<FeatureMsg>,
-    events: &'a Sender<AnalysisEvent>,
+    queues: &'a mut AnalysisQueues,
     stats: &'a Stats,
     base_time_s: f64,
     ingest_wall_ns: u64,
@@ -70,9 +84,15 @@ struct Out<'a> {
 }
 
 impl Out<'_> {
-    fn event(&self, e: AnalysisEvent) {
-        if self.events.try_send(e).is_err() {
+    fn event(&mut self, e: AnalysisEvent) {
+        if self.queues.events.push(e).is_err() {
             self.stats.events_dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    fn anchor(&mut self, a: Anchor) {
+        if self.queues.anchors.push(a).is_err() {
+            self.stats.anchors_dropped.fetch_add(1, Ordering::Relaxed);
         }
     }
 }
@@ -134,32 +154,30 @@ impl AnalysisSink for Out<'_> {
             ingest_wall_ns: self.ingest_wall_ns,
             grid: self.grid,
         };
-        // The motion thread holds seconds of backlog; a full channel means it is gone.
-        let _ = self.features.try_send(msg);
+        // The queue holds seconds of frames: full means the motion thread stalled.
+        if self.queues.features.push(msg).is_err() {
+            self.stats.features_dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        self.queues.motion_thread.unpark();
     }
 }
 
 /// Runs the analysis thread until `stop` is set; returns a message on a fatal analyzer error.
-#[allow(clippy::too_many_arguments)]
 pub fn run(
     mut reader: RingReader,
     settings: AnalysisSettings,
-    epoch: Instant,
-    timeline: Arc<Mutex<Timeline>>,
-    stats: Arc<Stats>,
-    stop: Arc<AtomicBool>,
-    features: Sender<FeatureMsg>,
-    events: Sender<AnalysisEvent>,
+    ctx: LiveContext,
+    mut queues: AnalysisQueues,
 ) -> Result<(), String> {
+    let LiveContext { epoch, stats, stop } = ctx;
     let mut scratch = vec![0.0f32; 16_384];
-    let silence = vec![0.0f32; SILENCE_BLOCK * 32];
+    let silence = vec![0.0f32; SILENCE_SAMPLES];
     let mut analyzer: Option<(Analyzer, u32, u16)> = None;
     let mut stream_s = 0.0f64;
     // Silence only after `silence_after_s` of this thread's own life without audio.
     let mut last_wall_ns = epoch.elapsed().as_nanos() as u64;
     let mut out = Out {
-        features: &features,
-        events: &events,
+        queues: &mut queues,
         stats: &stats,
         base_time_s: 0.0,
         ingest_wall_ns: 0,
@@ -167,15 +185,19 @@ pub fn run(
     };
     let silence_after_ns = (settings.silence_after_s * 1e9) as u64;
     let build = |rate: u32, channels: u16| {
-        Analyzer::new(AnalyzerConfig {
-            sample_rate: rate,
-            channels,
-            model_rate: Some(settings.model_rate),
-            tracker: dsp::BeatTrackerKind::Native,
-            beat_params: Default::default(),
+        // A new format is set-up, even inside the loop: it may allocate.
+        uncounted(|| {
+            Analyzer::new(AnalyzerConfig {
+                sample_rate: rate,
+                channels,
+                model_rate: Some(settings.model_rate),
+                tracker: dsp::BeatTrackerKind::Native,
+                beat_params: Default::default(),
+            })
         })
         .map_err(|e| format!("analysis of {rate} Hz, {channels} ch audio: {e}"))
     };
+    let _counting = CountGuard::new(RtThread::Analysis);
     while !stop.load(Ordering::Relaxed) {
         let mut worked = false;
         while let Some(m) = reader.next_marker() {
@@ -193,7 +215,8 @@ pub fn run(
                 .is_none_or(|(_, r, c)| (*r, *c) != (sample_rate, channels))
             {
                 // A new device or format: a fresh analyzer, continuing the stream clock.
-                analyzer = Some((build(sample_rate, channels)?, sample_rate, channels));
+                let fresh = build(sample_rate, channels)?;
+                uncounted(|| analyzer = Some((fresh, sample_rate, channels)));
                 out.base_time_s = stream_s;
             }
             let Some((an, _, _)) = analyzer.as_mut() else {
@@ -202,19 +225,12 @@ pub fn run(
             let total = frames as usize + dropped_before as usize;
             stream_s += total as f64 / f64::from(sample_rate);
             last_wall_ns = wall_ns;
-            if let Ok(mut t) = timeline.lock() {
-                t.anchors.push(Anchor {
-                    audio_end_s: stream_s,
-                    wall_ns,
-                });
-            }
+            out.anchor(Anchor {
+                audio_end_s: stream_s,
+                wall_ns,
+            });
             out.ingest_wall_ns = wall_ns;
-            let mut gap = dropped_before as usize * ch;
-            while gap > 0 {
-                let n = gap.min(silence.len() / ch * ch);
-                an.process(&silence[..n], &mut out);
-                gap -= n;
-            }
+            process_silence(an, &silence, dropped_before as usize, ch, &mut out);
             let mut left = frames as usize * ch;
             while left > 0 {
                 let want = left.min(scratch.len() / ch * ch);
@@ -231,24 +247,23 @@ pub fn run(
             if now_ns.saturating_sub(last_wall_ns) > silence_after_ns {
                 // No audio: analyse silence, back-dated block by block so the clock stays smooth.
                 if analyzer.is_none() {
-                    analyzer = Some((build(DEFAULT_RATE, 1)?, DEFAULT_RATE, 1));
+                    let fresh = build(DEFAULT_RATE, 1)?;
+                    uncounted(|| analyzer = Some((fresh, DEFAULT_RATE, 1)));
                     out.base_time_s = stream_s;
                 }
                 if let Some((an, rate, channels)) = analyzer.as_mut() {
-                    let ch = usize::from(*channels);
+                    let ch = usize::from((*channels).max(1));
                     let block_ns = (SILENCE_BLOCK as f64 / f64::from(*rate) * 1e9) as u64;
                     let mut wall = last_wall_ns.max(now_ns.saturating_sub(silence_after_ns));
                     while wall + block_ns <= now_ns && !stop.load(Ordering::Relaxed) {
                         wall += block_ns;
                         stream_s += SILENCE_BLOCK as f64 / f64::from(*rate);
-                        if let Ok(mut t) = timeline.lock() {
-                            t.anchors.push(Anchor {
-                                audio_end_s: stream_s,
-                                wall_ns: wall,
-                            });
-                        }
+                        out.anchor(Anchor {
+                            audio_end_s: stream_s,
+                            wall_ns: wall,
+                        });
                         out.ingest_wall_ns = wall;
-                        an.process(&silence[..SILENCE_BLOCK * ch], &mut out);
+                        process_silence(an, &silence, SILENCE_BLOCK, ch, &mut out);
                         stats
                             .silence_frames
                             .fetch_add(SILENCE_BLOCK as u64, Ordering::Relaxed);
@@ -260,4 +275,66 @@ pub fn run(
         }
     }
     Ok(())
+}
+
+/// Analyses `frames` frames of silence of `channels` channels, in whole-frame pieces of the
+/// preallocated `silence` buffer (so any channel count fits).
+fn process_silence(
+    an: &mut Analyzer,
+    silence: &[f32],
+    frames: usize,
+    channels: usize,
+    out: &mut Out<'_>,
+) {
+    let per_piece = (silence.len() / channels.max(1)).max(1);
+    let mut left = frames;
+    while left > 0 {
+        let n = left.min(per_piece);
+        let samples = (n * channels).min(silence.len());
+        an.process(&silence[..samples], out);
+        left -= n;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn silence_for_any_channel_count_fits_the_buffer() {
+        // The first 64-channel capture panicked here: 256 frames × 64 ch > the silence buffer.
+        let silence = vec![0.0f32; SILENCE_SAMPLES];
+        let stats = Stats::new();
+        for channels in [1u16, 2, 33, 64, 1000] {
+            let (features, mut feature_rx) = rtrb::RingBuffer::new(1024);
+            let (events, _events_rx) = rtrb::RingBuffer::new(4096);
+            let (anchors, _anchors_rx) = rtrb::RingBuffer::new(16);
+            let mut queues = AnalysisQueues {
+                features,
+                events,
+                anchors,
+                motion_thread: std::thread::current(),
+            };
+            let mut out = Out {
+                queues: &mut queues,
+                stats: &stats,
+                base_time_s: 0.0,
+                ingest_wall_ns: 0,
+                grid: BeatGrid::default(),
+            };
+            let mut an = Analyzer::new(AnalyzerConfig {
+                sample_rate: 48_000,
+                channels,
+                model_rate: Some(25.0),
+                tracker: dsp::BeatTrackerKind::Native,
+                beat_params: Default::default(),
+            })
+            .unwrap();
+            process_silence(&mut an, &silence, 48_000, usize::from(channels), &mut out);
+            // One second of audio: 25 model frames, less the analysis's own latency.
+            let frames = feature_rx.slots();
+            assert!((20..=25).contains(&frames), "{channels} ch: {frames} frames");
+            while feature_rx.pop().is_ok() {}
+        }
+    }
 }

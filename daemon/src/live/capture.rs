@@ -1,16 +1,19 @@
-//! Sound card capture (cpal): the stream callback only copies (converting integer samples) into
-//! the preallocated audio ring; a supervisor thread owns the stream and rebuilds it with
-//! exponential backoff when the device goes away.
+//! Sound card capture (cpal): the stream callback only converts and copies the heard channels
+//! into the preallocated audio ring ([`InputMix`]); a supervisor thread owns the stream and
+//! rebuilds it, on the same device, when the device goes away or stops delivering.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use cpal::traits::{DeviceTrait, HostTrait, StreamTrait};
-use cpal::{ErrorKind, SampleFormat, StreamConfig, SupportedStreamConfig};
+use cpal::{
+    ErrorKind, SampleFormat, StreamConfig, SupportedStreamConfig, SupportedStreamConfigRange,
+};
 use thiserror::Error;
 
+use super::input_mix::{InputMix, MAX_INPUT_CHANNELS};
 use super::pipeline::LiveContext;
 use super::ring::RingWriter;
 use crate::alloc_counter::in_callback;
@@ -47,6 +50,8 @@ pub enum CaptureError {
 pub struct CaptureSettings {
     /// Case-insensitive substring of the device name; the default input when `None`.
     pub device: Option<String>,
+    /// Device channels to hear, 1-based (see [`InputMix::new`]); inputs 1 and 2 when `None`.
+    pub channels: Option<Vec<u16>>,
 }
 
 /// A device's display name (cpal 0.18: `description().name()`, else its `Display`).
@@ -77,26 +82,32 @@ fn find_device(host: &cpal::Host, wanted: Option<&str>) -> Result<cpal::Device, 
     }
 }
 
+/// Preference of a sample format: floats and wide integers first, 64-bit integers (rarely
+/// native, converted by the driver) last; DSD is not PCM and cannot be read.
 fn format_rank(f: SampleFormat) -> Option<u8> {
-    match f {
-        SampleFormat::F32 => Some(3),
-        SampleFormat::I32 => Some(2),
-        SampleFormat::I16 => Some(1),
-        SampleFormat::U16 => Some(0),
-        _ => None,
-    }
+    Some(match f {
+        SampleFormat::F32 => 9,
+        SampleFormat::I32 => 8,
+        SampleFormat::I24 => 7,
+        SampleFormat::I16 => 6,
+        SampleFormat::F64 => 5,
+        SampleFormat::U32 | SampleFormat::U24 | SampleFormat::U16 => 4,
+        SampleFormat::I8 | SampleFormat::U8 => 3,
+        SampleFormat::I64 | SampleFormat::U64 => 2,
+        _ => return None,
+    })
 }
 
-/// Picks a readable format: f32 before i32/i16/u16, 48 or 44.1 kHz when offered.
-pub fn choose_config(device: &cpal::Device) -> Result<SupportedStreamConfig, CaptureError> {
-    let no_config = |reason: String| CaptureError::NoConfig {
-        device: device_name(device),
-        reason,
-    };
-    let ranges = device
-        .supported_input_configs()
-        .map_err(|e| no_config(e.to_string()))?;
+/// Picks the format `run` opens among a device's offered ranges: a mono or stereo config
+/// before a wider one (an interface's plug layer often offers both), 48 or 44.1 kHz before
+/// other rates, then the best sample format. `None` when nothing is readable (1–64 channels,
+/// PCM, 8–192 kHz).
+pub fn choose_from(
+    ranges: impl IntoIterator<Item = SupportedStreamConfigRange>,
+) -> Option<SupportedStreamConfig> {
     ranges
+        .into_iter()
+        .filter(|r| (1..=MAX_INPUT_CHANNELS).contains(&r.channels()))
         .filter_map(|r| Some((format_rank(r.sample_format())?, r)))
         .filter_map(|(rank, r)| {
             let preferred = [48_000, 44_100].into_iter().find(|&s| r.contains_rate(s));
@@ -106,28 +117,90 @@ pub fn choose_config(device: &cpal::Device) -> Result<SupportedStreamConfig, Cap
             };
             let rate_ok =
                 (dsp::MIN_INPUT_RATE..=dsp::MAX_INPUT_RATE).contains(&config.sample_rate());
-            rate_ok.then_some(((rank, preferred.is_some()), config))
+            let narrow = config.channels() <= 2;
+            // Among equals, stereo before mono (no driver downmix), fewer channels before more.
+            let width = u16::MAX - config.channels().abs_diff(2);
+            rate_ok.then_some(((narrow, preferred.is_some(), rank, width), config))
         })
         .max_by(|a, b| a.0.cmp(&b.0))
         .map(|(_, c)| c)
-        .ok_or_else(|| no_config("no f32/i32/i16/u16 format at 8–192 kHz".into()))
 }
 
-/// Shared with the callback; `try_lock` only, so the callback never waits (nobody else holds
-/// it while a stream runs: the supervisor drops a stream before building the next).
-type SharedWriter = Arc<Mutex<RingWriter>>;
+/// Picks the format `run` opens on `device` (see [`choose_from`]).
+pub fn choose_config(device: &cpal::Device) -> Result<SupportedStreamConfig, CaptureError> {
+    let no_config = |reason: String| CaptureError::NoConfig {
+        device: device_name(device),
+        reason,
+    };
+    let ranges = device
+        .supported_input_configs()
+        .map_err(|e| no_config(e.to_string()))?;
+    choose_from(ranges).ok_or_else(|| {
+        no_config(format!(
+            "no PCM format with 1–{MAX_INPUT_CHANNELS} channels at 8–192 kHz"
+        ))
+    })
+}
+
+/// Where the ring writer waits while no stream owns it. The supervisor takes it to build a
+/// stream; the stream's callback state puts it back when cpal drops the callback. Only the
+/// supervisor and that drop touch the lock: the callback itself owns the writer outright.
+type WriterSlot = Arc<Mutex<Option<RingWriter>>>;
+
+/// What the stream callback owns.
+struct CallbackState {
+    writer: Option<RingWriter>,
+    mix: InputMix,
+    rate: u32,
+    slot: WriterSlot,
+    last_callback_ns: Arc<AtomicU64>,
+    epoch: std::time::Instant,
+}
+
+impl CallbackState {
+    fn on_block(&mut self, data: &cpal::Data) {
+        in_callback(|| {
+            let now = self.epoch.elapsed().as_nanos() as u64;
+            self.last_callback_ns.store(now, Ordering::Relaxed);
+            if let Some(w) = self.writer.as_mut() {
+                self.mix.write(data, self.rate, w);
+            }
+        })
+    }
+}
+
+impl Drop for CallbackState {
+    fn drop(&mut self) {
+        if let Some(w) = self.writer.take()
+            && let Ok(mut slot) = self.slot.lock()
+        {
+            *slot = Some(w);
+        }
+    }
+}
+
+/// Takes the writer from its slot, waiting up to 2 s for a dropped stream to hand it back.
+fn take_writer(slot: &WriterSlot) -> Option<RingWriter> {
+    for _ in 0..200 {
+        if let Some(w) = slot.lock().ok().and_then(|mut s| s.take()) {
+            return Some(w);
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    None
+}
 
 fn build_stream(
     device: &cpal::Device,
     config: &SupportedStreamConfig,
-    writer: SharedWriter,
+    mix: InputMix,
+    slot: &WriterSlot,
     ctx: &LiveContext,
-    broken: Arc<AtomicBool>,
+    health: &StreamHealth,
 ) -> Result<cpal::Stream, CaptureError> {
     let stream_config: StreamConfig = config.config();
-    let rate = stream_config.sample_rate;
-    let channels = stream_config.channels;
     let stats = ctx.stats.clone();
+    let broken = health.broken.clone();
     let on_error = move |e: cpal::Error| {
         stats.stream_errors.fetch_add(1, Ordering::Relaxed);
         if matches!(
@@ -143,127 +216,113 @@ fn build_stream(
         device: device_name(device),
         reason: e.to_string(),
     };
-    // Conversion scratch, allocated here, reused by every callback.
-    let mut scratch = vec![0.0f32; 16_384];
-    let stream = match config.sample_format() {
-        SampleFormat::F32 => device.build_input_stream::<f32, _, _>(
+    let writer = take_writer(slot).ok_or_else(|| CaptureError::Stream {
+        device: device_name(device),
+        reason: "the previous stream never released the audio ring".into(),
+    })?;
+    health
+        .last_callback_ns
+        .store(ctx.epoch.elapsed().as_nanos() as u64, Ordering::Relaxed);
+    let mut state = CallbackState {
+        writer: Some(writer),
+        mix,
+        rate: stream_config.sample_rate,
+        slot: slot.clone(),
+        last_callback_ns: health.last_callback_ns.clone(),
+        epoch: ctx.epoch,
+    };
+    // On failure cpal drops the callback, and with it `state`, which returns the writer.
+    let stream = device
+        .build_input_stream_raw(
             stream_config,
-            move |data: &[f32], _: &cpal::InputCallbackInfo| {
-                in_callback(|| {
-                    if let Ok(mut w) = writer.try_lock() {
-                        w.write(data, rate, channels);
-                    }
-                })
-            },
+            config.sample_format(),
+            move |data: &cpal::Data, _: &cpal::InputCallbackInfo| state.on_block(data),
             on_error,
             None,
-        ),
-        SampleFormat::I32 => device.build_input_stream::<i32, _, _>(
-            stream_config,
-            move |data: &[i32], _: &cpal::InputCallbackInfo| {
-                in_callback(|| {
-                    if let Ok(mut w) = writer.try_lock() {
-                        w.write_converted(
-                            data,
-                            &mut scratch,
-                            |s| s as f32 / 2_147_483_648.0,
-                            rate,
-                            channels,
-                        );
-                    }
-                })
-            },
-            on_error,
-            None,
-        ),
-        SampleFormat::I16 => device.build_input_stream::<i16, _, _>(
-            stream_config,
-            move |data: &[i16], _: &cpal::InputCallbackInfo| {
-                in_callback(|| {
-                    if let Ok(mut w) = writer.try_lock() {
-                        w.write_converted(
-                            data,
-                            &mut scratch,
-                            |s| f32::from(s) / 32_768.0,
-                            rate,
-                            channels,
-                        );
-                    }
-                })
-            },
-            on_error,
-            None,
-        ),
-        SampleFormat::U16 => device.build_input_stream::<u16, _, _>(
-            stream_config,
-            move |data: &[u16], _: &cpal::InputCallbackInfo| {
-                in_callback(|| {
-                    if let Ok(mut w) = writer.try_lock() {
-                        w.write_converted(
-                            data,
-                            &mut scratch,
-                            |s| (f32::from(s) - 32_768.0) / 32_768.0,
-                            rate,
-                            channels,
-                        );
-                    }
-                })
-            },
-            on_error,
-            None,
-        ),
-        other => {
-            return Err(CaptureError::NoConfig {
-                device: device_name(device),
-                reason: format!("sample format {other:?}"),
-            });
-        }
-    }
-    .map_err(err)?;
+        )
+        .map_err(err)?;
     stream.play().map_err(err)?;
     Ok(stream)
 }
 
-fn open(
-    settings: &CaptureSettings,
-    writer: &SharedWriter,
-    ctx: &LiveContext,
-    broken: &Arc<AtomicBool>,
-) -> Result<(cpal::Stream, String), CaptureError> {
-    let host = cpal::default_host();
-    let device = find_device(&host, settings.device.as_deref())?;
-    let config = choose_config(&device)?;
-    broken.store(false, Ordering::Relaxed);
-    let stream = build_stream(&device, &config, writer.clone(), ctx, broken.clone())?;
-    let desc = format!(
-        "{} ({} Hz, {} ch, {:?})",
-        device_name(&device),
-        config.sample_rate(),
-        config.channels(),
-        config.sample_format()
-    );
-    Ok((stream, desc))
+/// What the supervisor watches: the backend's error flag and the time of the last callback.
+struct StreamHealth {
+    broken: Arc<AtomicBool>,
+    last_callback_ns: Arc<AtomicU64>,
 }
 
-/// Opens the input and starts the supervisor thread that keeps it open until the run stops.
-/// Fails cleanly (no panic) when there is no usable input; returns the device description.
+/// How a stream was opened, for the banner and `danced devices`.
+fn describe(device: &str, config: &SupportedStreamConfig, mix: &InputMix) -> String {
+    let heard: Vec<String> = mix.heard().map(|c| c.to_string()).collect();
+    format!(
+        "{device} ({} Hz, {} ch, {:?}; hearing input {})",
+        config.sample_rate(),
+        config.channels(),
+        config.sample_format(),
+        heard.join("+")
+    )
+}
+
+/// Finds the device: by substring the first time, by exact name on every reconnect, so a
+/// lost interface is never silently replaced by another.
+fn open(
+    settings: &CaptureSettings,
+    exact_name: Option<&str>,
+    slot: &WriterSlot,
+    ctx: &LiveContext,
+    health: &StreamHealth,
+) -> Result<(cpal::Stream, String, String), CaptureError> {
+    let host = cpal::default_host();
+    let device = match exact_name {
+        Some(name) => host
+            .input_devices()
+            .map_err(|_| CaptureError::NoDevices)?
+            .find(|d| device_name(d) == name)
+            .ok_or_else(|| CaptureError::NoMatch(name.to_string()))?,
+        None => find_device(&host, settings.device.as_deref())?,
+    };
+    let name = device_name(&device);
+    let config = choose_config(&device)?;
+    let mix = InputMix::new(config.channels(), settings.channels.as_deref()).map_err(|e| {
+        CaptureError::NoConfig {
+            device: name.clone(),
+            reason: e.to_string(),
+        }
+    })?;
+    let desc = describe(&name, &config, &mix);
+    health.broken.store(false, Ordering::Relaxed);
+    let stream = build_stream(&device, &config, mix, slot, ctx, health)?;
+    Ok((stream, name, desc))
+}
+
+/// A stream silent this long is taken as stalled and rebuilt.
+pub const STALL_AFTER: Duration = Duration::from_millis(400);
+
+/// Opens the input and starts the supervisor thread that keeps it open until the run stops:
+/// a stream the backend reports lost, or one that stops calling back for [`STALL_AFTER`], is
+/// dropped and rebuilt on the same device, with backoff while the device is gone (the
+/// pipeline dances on silence meanwhile). Fails cleanly (no panic) when there is no usable
+/// input; returns the device description.
 pub fn spawn(
     settings: CaptureSettings,
     writer: RingWriter,
     ctx: &LiveContext,
 ) -> Result<(JoinHandle<()>, String), CaptureError> {
-    let writer: SharedWriter = Arc::new(Mutex::new(writer));
+    let slot: WriterSlot = Arc::new(Mutex::new(Some(writer)));
     let (tx, rx) = crossbeam_channel::bounded(1);
     let ctx = ctx.clone();
     let handle = std::thread::Builder::new()
         .name("danced-capture".into())
         .spawn(move || {
-            let broken = Arc::new(AtomicBool::new(false));
+            let health = StreamHealth {
+                broken: Arc::new(AtomicBool::new(false)),
+                last_callback_ns: Arc::new(AtomicU64::new(0)),
+            };
             // The stream is owned by this thread for its whole life (cpal streams need not be Send).
-            let mut stream = match open(&settings, &writer, &ctx, &broken) {
-                Ok((s, desc)) => {
+            let (mut stream, name) = match open(&settings, None, &slot, &ctx, &health) {
+                Ok((s, name, desc)) => {
                     let _ = tx.send(Ok(desc));
-                    Some(s)
+                    (Some(s), name)
                 }
                 Err(e) => {
                     let _ = tx.send(Err(e));
@@ -271,28 +330,40 @@ pub fn spawn(
                 }
             };
             let mut backoff = Duration::from_millis(100);
+            let stall_ns = STALL_AFTER.as_nanos() as u64;
             while !ctx.stopped() {
                 std::thread::sleep(Duration::from_millis(50));
-                if !broken.load(Ordering::Relaxed) && stream.is_some() {
+                let now = ctx.epoch.elapsed().as_nanos() as u64;
+                let silent_ns = now.saturating_sub(health.last_callback_ns.load(Ordering::Relaxed));
+                let stalled = stream.is_some() && silent_ns > stall_ns;
+                if stalled {
+                    ctx.stats.capture_stalls.fetch_add(1, Ordering::Relaxed);
+                    tracing::warn!("audio input {name:?} stopped delivering; rebuilding the stream");
+                }
+                if !health.broken.load(Ordering::Relaxed) && stream.is_some() && !stalled {
                     continue;
                 }
-                // Lost: drop the stream (the pipeline analyses silence meanwhile), then retry.
-                stream = None;
-                let mut waited = Duration::ZERO;
-                while waited < backoff && !ctx.stopped() {
-                    std::thread::sleep(Duration::from_millis(50));
-                    waited += Duration::from_millis(50);
+                if stream.take().is_some() {
+                    // Lost: the pipeline analyses silence meanwhile; retry right away once.
+                    backoff = Duration::from_millis(100);
+                } else {
+                    let mut waited = Duration::ZERO;
+                    while waited < backoff && !ctx.stopped() {
+                        std::thread::sleep(Duration::from_millis(50));
+                        waited += Duration::from_millis(50);
+                    }
                 }
-                match open(&settings, &writer, &ctx, &broken) {
-                    Ok((s, desc)) => {
+                match open(&settings, Some(&name), &slot, &ctx, &health) {
+                    Ok((s, _, desc)) => {
                         tracing::info!("audio input back: {desc}");
                         ctx.stats.reconnects.fetch_add(1, Ordering::Relaxed);
                         stream = Some(s);
                         backoff = Duration::from_millis(100);
                     }
                     Err(e) => {
+                        ctx.stats.reconnect_failures.fetch_add(1, Ordering::Relaxed);
                         tracing::warn!("audio input still gone ({e}); retrying in {backoff:?}");
-                        backoff = (backoff * 2).min(Duration::from_secs(5));
+                        backoff = (backoff * 2).min(Duration::from_secs(2));
                     }
                 }
             }
@@ -311,6 +382,67 @@ pub fn spawn(
         Err(_) => {
             let _ = handle.join();
             Err(CaptureError::NoDevices)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cpal::SupportedBufferSize;
+
+    fn range(channels: u16, min: u32, max: u32, f: SampleFormat) -> SupportedStreamConfigRange {
+        SupportedStreamConfigRange::new(channels, min, max, SupportedBufferSize::Unknown, f)
+    }
+
+    #[test]
+    fn prefers_stereo_at_48_or_44k_over_a_wide_float_config() {
+        // A 64-channel interface behind a plug layer: 64 ch F32 native, 1–2 ch I16 converted.
+        let offered = vec![
+            range(64, 8_000, 192_000, SampleFormat::F32),
+            range(1, 8_000, 192_000, SampleFormat::I16),
+            range(2, 8_000, 192_000, SampleFormat::I16),
+        ];
+        let c = choose_from(offered).unwrap();
+        assert_eq!((c.channels(), c.sample_rate()), (2, 48_000));
+        assert_eq!(c.sample_format(), SampleFormat::I16);
+        // Only wide configs: the 64-channel one, at 44.1 kHz when 48 kHz is not offered.
+        let c = choose_from(vec![range(64, 44_100, 44_100, SampleFormat::I32)]).unwrap();
+        assert_eq!((c.channels(), c.sample_rate()), (64, 44_100));
+        // Float beats integer among stereo configs; a preferred rate beats a better format.
+        let c = choose_from(vec![
+            range(2, 96_000, 96_000, SampleFormat::F32),
+            range(2, 48_000, 48_000, SampleFormat::I24),
+        ])
+        .unwrap();
+        assert_eq!((c.sample_rate(), c.sample_format()), (48_000, SampleFormat::I24));
+    }
+
+    #[test]
+    fn unreadable_configs_are_refused() {
+        assert!(choose_from(vec![range(65, 48_000, 48_000, SampleFormat::F32)]).is_none());
+        assert!(choose_from(vec![range(2, 48_000, 48_000, SampleFormat::DsdU8)]).is_none());
+        assert!(choose_from(vec![range(2, 4_000, 4_000, SampleFormat::F32)]).is_none());
+        assert!(choose_from(vec![range(0, 48_000, 48_000, SampleFormat::F32)]).is_none());
+        // Every PCM format at every channel count 1–64 is accepted.
+        for f in [
+            SampleFormat::I8,
+            SampleFormat::I16,
+            SampleFormat::I24,
+            SampleFormat::I32,
+            SampleFormat::I64,
+            SampleFormat::U8,
+            SampleFormat::U16,
+            SampleFormat::U24,
+            SampleFormat::U32,
+            SampleFormat::U64,
+            SampleFormat::F32,
+            SampleFormat::F64,
+        ] {
+            for ch in 1..=MAX_INPUT_CHANNELS {
+                let c = choose_from(vec![range(ch, 48_000, 48_000, f)]).unwrap();
+                assert!(InputMix::new(c.channels(), None).is_ok() && InputMix::reads(f));
+            }
         }
     }
 }

@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use protocols::control::{BEAT_ACCENT_RANGE, TEMPERATURE_RANGE, TRANSITION_BEATS_RANGE};
 use serde::Deserialize;
 use thiserror::Error;
 
@@ -70,6 +71,9 @@ pub struct AudioConfig {
     pub looped: bool,
     /// Stop after this many seconds of audio.
     pub duration: Option<f64>,
+    /// Capture channels to hear, 1-based (inputs 1 and 2 when absent; more than two are
+    /// averaged to mono).
+    pub channels: Option<Vec<u16>>,
 }
 
 impl Default for AudioConfig {
@@ -80,6 +84,7 @@ impl Default for AudioConfig {
             speed: 1.0,
             looped: false,
             duration: None,
+            channels: None,
         }
     }
 }
@@ -278,26 +283,37 @@ impl Config {
         if self.audio.input.is_some() && self.audio.device.is_some() {
             return Err(bad("audio.input", "and audio.device are exclusive".into()));
         }
-        let t = self.dancer.temperature;
-        if !(t.is_finite() && (0.0..=10.0).contains(&t)) {
+        // The same ranges as the live controls (OSC, MIDI): one definition, in `protocols`.
+        let (t, (lo, hi)) = (self.dancer.temperature, TEMPERATURE_RANGE);
+        if !(t.is_finite() && (lo..=hi).contains(&t)) {
             return Err(bad(
                 "dancer.temperature",
-                format!("= {t}: must be in 0..=10"),
+                format!("= {t}: must be in {lo}..={hi}"),
             ));
         }
-        let b = self.dancer.transition_beats;
-        if !(b.is_finite() && (0.0..=64.0).contains(&b)) {
+        let (b, (lo, hi)) = (self.dancer.transition_beats, TRANSITION_BEATS_RANGE);
+        if !(b.is_finite() && b > lo && b <= hi) {
             return Err(bad(
                 "dancer.transition_beats",
-                format!("= {b}: must be in 0..=64"),
+                format!("= {b}: must be above {lo} and at most {hi}"),
             ));
         }
-        let a = self.dancer.beat_accent;
-        if !(a.is_finite() && (0.0..=0.9).contains(&a)) {
+        let (a, (lo, hi)) = (self.dancer.beat_accent, BEAT_ACCENT_RANGE);
+        if !(a.is_finite() && (lo..=hi).contains(&a)) {
             return Err(bad(
                 "dancer.beat_accent",
-                format!("= {a}: must be in 0..=0.9"),
+                format!("= {a}: must be in {lo}..={hi}"),
             ));
+        }
+        if let Some(list) = &self.audio.channels {
+            let max = super::input_mix::MAX_INPUT_CHANNELS;
+            let mut seen = std::collections::BTreeSet::new();
+            if list.is_empty() || list.iter().any(|&c| c == 0 || c > max || !seen.insert(c)) {
+                return Err(bad(
+                    "audio.channels",
+                    format!("= {list:?}: must list distinct input channels in 1..={max}"),
+                ));
+            }
         }
         match crate::dancer::SourceKind::parse(&self.dancer.source) {
             None => {

@@ -8,16 +8,16 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use crossbeam_channel::Sender;
 use glam::Quat;
 use model::rig::JOINT_COUNT;
 use protocols::{
-    ControlEvent, ControlParser, ControlReceiver, MidiInputs, MidiMap, MidiParser, NativeEncoder,
+    ControlParser, ControlReceiver, MidiInputs, MidiMap, MidiParser, NativeEncoder,
     OscOutput, OscTarget, TargetKind, VmcEncoder, VrchatEncoder, VrchatTrackerMap, parse_target,
 };
 
 use super::config::Config;
-use super::sink::{FrameSink, PoseBank};
+use super::control_queue::ControlHub;
+use super::sink::{FrameSink, PoseBank, SinkLosses};
 use super::wire::{AnalysisEvent, BodyFrame};
 
 /// Sends frames and events to every configured OSC target.
@@ -97,11 +97,20 @@ impl FrameSink for OscSink {
     fn packets_sent(&self) -> u64 {
         self.out.packets_sent()
     }
+    fn losses(&self) -> SinkLosses {
+        SinkLosses {
+            send_errors: self.out.send_errors(),
+            ..SinkLosses::default()
+        }
+    }
 }
 
 impl PoseBank for crate::pose_bank::PoseBank {
     fn get(&self, name: &str) -> Option<[Quat; JOINT_COUNT]> {
         crate::pose_bank::PoseBank::get(self, name).map(|p| p.rotations)
+    }
+    fn names(&self) -> Vec<String> {
+        self.poses().iter().map(|p| p.name.clone()).collect()
     }
 }
 
@@ -116,6 +125,10 @@ pub struct ControlCounters {
     pub midi_events: AtomicU64,
     /// MIDI bytes dropped by the parser (running status gone wrong, truncated messages).
     pub midi_dropped: AtomicU64,
+    /// MIDI messages midir delivered that were too long to read (system exclusive).
+    pub midi_skipped: AtomicU64,
+    /// MIDI messages lost because the queue from midir's thread was full.
+    pub midi_queue_full: AtomicU64,
 }
 
 /// The running control inputs; dropping them does not stop them, [`ControlInputs::join`] does.
@@ -131,8 +144,8 @@ pub struct ControlInputs {
 
 impl ControlInputs {
     /// Starts the OSC control receiver (`control.osc_port`, 0 = off) and the MIDI input
-    /// (`control.midi_port`), both sending into `tx` until `stop` is set.
-    pub fn start(config: &Config, tx: Sender<ControlEvent>, stop: Arc<AtomicBool>) -> Result<Self> {
+    /// (`control.midi_port`), each with its own sender from `hub`, until `stop` is set.
+    pub fn start(config: &Config, hub: &mut ControlHub, stop: Arc<AtomicBool>) -> Result<Self> {
         let counters = Arc::new(ControlCounters::default());
         let mut inputs = ControlInputs {
             threads: Vec::new(),
@@ -152,7 +165,16 @@ impl ControlInputs {
             let mut receiver = ControlReceiver::bind(addr, ControlParser::default())
                 .with_context(|| format!("listening for OSC control on {addr}"))?;
             inputs.osc_addr = receiver.local_addr().ok();
-            let (tx, stop, counters) = (tx.clone(), stop.clone(), counters.clone());
+            if !receiver
+                .local_addr()
+                .is_ok_and(|a| a.ip().is_loopback())
+            {
+                tracing::warn!(
+                    "OSC control listens on {addr}, beyond this machine: anyone on the network \
+                     can steer the dancer (set control.allow to the controllers' addresses)"
+                );
+            }
+            let (mut tx, stop, counters) = (hub.sender(), stop.clone(), counters.clone());
             inputs.threads.push(
                 std::thread::Builder::new()
                     .name("osc-control".into())
@@ -166,7 +188,8 @@ impl ControlInputs {
                                 std::thread::sleep(Duration::from_millis(1));
                             }
                             for e in events.drain(..) {
-                                let _ = tx.try_send(e);
+                                // Refusals are counted by the sender.
+                                let _ = tx.send(e);
                             }
                             let p = receiver.parser();
                             counters.osc_accepted.store(p.accepted(), Ordering::Relaxed);
@@ -191,13 +214,13 @@ impl ControlInputs {
             let connection = MidiInputs::connect(port, raw_tx)
                 .with_context(|| format!("opening MIDI input {port:?}"))?;
             inputs.midi_port = Some(connection.port_name().to_string());
-            let (tx, stop, counters) = (tx, stop, counters);
+            let (mut tx, stop, counters) = (hub.sender(), stop, counters);
             inputs.threads.push(
                 std::thread::Builder::new()
                     .name("midi-control".into())
                     .spawn(move || {
                         // The connection lives as long as this thread: dropping it closes the port.
-                        let _connection = connection;
+                        let connection = connection;
                         let mut map = map;
                         let mut parser = MidiParser::default();
                         let mut events = Vec::with_capacity(16);
@@ -213,8 +236,14 @@ impl ControlInputs {
                             counters
                                 .midi_dropped
                                 .store(parser.dropped(), Ordering::Relaxed);
+                            counters
+                                .midi_skipped
+                                .store(connection.skipped(), Ordering::Relaxed);
+                            counters
+                                .midi_queue_full
+                                .store(connection.dropped(), Ordering::Relaxed);
                             for e in events.drain(..) {
-                                let _ = tx.try_send(e);
+                                let _ = tx.send(e);
                             }
                         }
                     })?,

@@ -4,7 +4,9 @@
 pub mod analysis;
 pub mod capture;
 pub mod config;
+pub mod control_queue;
 pub mod devices;
+pub mod input_mix;
 pub mod io;
 pub mod motion;
 pub mod pipeline;

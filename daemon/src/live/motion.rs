@@ -2,21 +2,21 @@
 //! look-ahead has been analysed, with the performer's controls applied (key poses quantised to
 //! the beat grid the analysis predicts).
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::sync::atomic::Ordering;
+use std::time::Duration;
 
-use crossbeam_channel::{Receiver, RecvTimeoutError};
 use dsp::feature::FEATURE_DIM;
 use glam::Quat;
 use model::rig::{JOINT_COUNT, Pose};
 use model::source::{Controls, KeyPoseTarget, MotionSource};
 
 use super::analysis::{BeatGrid, FeatureMsg};
-use super::sink::PoseBank;
-use super::stats::{KEY_POSE_NONE, KEY_POSE_PENDING, KEY_POSE_REACHED, Stats};
-use super::timeline::{TimedPose, Timeline};
-use super::wire::{ControlEvent, Quantize};
+use super::control_queue::{ControlReceiver, MotionCommand};
+use super::pipeline::LiveContext;
+use super::stats::{KEY_POSE_NONE, KEY_POSE_PENDING, KEY_POSE_REACHED};
+use super::timeline::TimedPose;
+use super::wire::Quantize;
+use crate::alloc_counter::{CountGuard, RtThread};
 
 /// Beat period assumed when neither the analysis nor a tempo hint gives one (120 BPM).
 const FALLBACK_PERIOD_S: f64 = 0.5;
@@ -74,7 +74,7 @@ pub struct MotionSettings {
 }
 
 struct KeyPose {
-    rotations: [Quat; JOINT_COUNT],
+    pose: u16,
     target_s: f64,
 }
 
@@ -86,19 +86,26 @@ struct State {
     key: Option<KeyPose>,
 }
 
-/// Runs the motion thread until the feature channel closes or `stop` is set.
-#[allow(clippy::too_many_arguments)]
+/// The motion thread's ends of its queues.
+pub struct MotionQueues {
+    /// Feature frames from the analysis thread (which unparks this thread after each).
+    pub features: rtrb::Consumer<FeatureMsg>,
+    /// The performer's controls.
+    pub controls: ControlReceiver,
+    /// Poses to the sender thread.
+    pub poses: rtrb::Producer<TimedPose>,
+}
+
+/// Runs the motion thread until the analysis thread is gone or `stop` is set. `table` holds
+/// the key poses by the indices the control path resolved names to.
 pub fn run(
     mut source: Box<dyn MotionSource + Send>,
-    poses: Box<dyn PoseBank + Send>,
+    table: Vec<[Quat; JOINT_COUNT]>,
     settings: MotionSettings,
-    epoch: Instant,
-    timeline: Arc<Mutex<Timeline>>,
-    stats: Arc<Stats>,
-    stop: Arc<AtomicBool>,
-    features: Receiver<FeatureMsg>,
-    controls: Receiver<ControlEvent>,
+    ctx: LiveContext,
+    mut queues: MotionQueues,
 ) {
+    let LiveContext { epoch, stats, stop } = ctx;
     let rate = source.frame_rate();
     let need = source.lookahead_frames() + 1;
     let mut window: Vec<[f32; FEATURE_DIM]> = Vec::with_capacity(need);
@@ -116,31 +123,27 @@ pub fn run(
         paused: false,
         key: None,
     };
-    stats.temperature.set(st.controls.temperature);
-    stats
-        .beat_accent
-        .set(st.controls.beat_accent.unwrap_or(f32::NAN));
     let mut next_time = 0.0f64;
+    // Everything above is set-up; from here on nothing may allocate.
+    let _counting = CountGuard::new(RtThread::Motion);
     while !stop.load(Ordering::Relaxed) {
-        while let Ok(c) = controls.try_recv() {
-            let now_s = times.first().copied().unwrap_or(next_time);
-            let ok = apply(&mut st, c, &*poses, &mut *source, now_s, &grid, rate);
-            let counter = if ok {
-                &stats.controls_accepted
-            } else {
-                &stats.controls_rejected
-            };
-            counter.fetch_add(1, Ordering::Relaxed);
-        }
+        let now_s = times.first().copied().unwrap_or(next_time);
+        queues.controls.poll(|c| {
+            apply(&mut st, c, &mut *source, now_s, &grid, rate);
+        });
         stats.temperature.set(st.controls.temperature);
         stats
             .beat_accent
             .set(st.controls.beat_accent.unwrap_or(f32::NAN));
         stats.paused.store(u32::from(st.paused), Ordering::Relaxed);
-        let msg = match features.recv_timeout(Duration::from_millis(5)) {
+        let msg = match queues.features.pop() {
             Ok(m) => m,
-            Err(RecvTimeoutError::Timeout) => continue,
-            Err(RecvTimeoutError::Disconnected) => break,
+            Err(_) if queues.features.is_abandoned() => break,
+            Err(_) => {
+                // Woken by the analysis thread as soon as a frame is queued.
+                std::thread::park_timeout(Duration::from_millis(5));
+                continue;
+            }
         };
         grid = msg.grid;
         window.push(msg.values);
@@ -149,9 +152,11 @@ pub fn run(
             continue;
         }
         let t = times[0];
-        st.controls.key_pose = st.key.as_ref().map(|k| KeyPoseTarget {
-            rotations: k.rotations,
-            frames_to_go: ((k.target_s - t) * rate).round().max(0.0) as u32,
+        st.controls.key_pose = st.key.as_ref().and_then(|k| {
+            Some(KeyPoseTarget {
+                rotations: *table.get(usize::from(k.pose))?,
+                frames_to_go: ((k.target_s - t) * rate).round().max(0.0) as u32,
+            })
         });
         match st.controls.key_pose {
             Some(k) => {
@@ -177,8 +182,8 @@ pub fn run(
                 .key_pose_state
                 .store(KEY_POSE_REACHED, Ordering::Relaxed);
         }
-        if let Ok(mut tl) = timeline.lock() {
-            tl.poses.push(TimedPose { time_s: t, pose });
+        if queues.poses.push(TimedPose { time_s: t, pose }).is_err() {
+            stats.poses_dropped.fetch_add(1, Ordering::Relaxed);
         }
         let now_ns = epoch.elapsed().as_nanos() as u64;
         stats
@@ -191,27 +196,19 @@ pub fn run(
     }
 }
 
+/// Applies one control (already validated and resolved by the control path).
 fn apply(
     st: &mut State,
-    event: ControlEvent,
-    poses: &dyn PoseBank,
+    command: MotionCommand,
     source: &mut dyn MotionSource,
     now_s: f64,
     grid: &BeatGrid,
     rate: f64,
-) -> bool {
-    match event {
-        ControlEvent::Temperature(t) if t.is_finite() && (0.0..=10.0).contains(&t) => {
-            st.controls.temperature = t;
-        }
-        ControlEvent::BeatAccent(a) if a.is_finite() && (0.0..=0.9).contains(&a) => {
-            st.controls.beat_accent = Some(a);
-        }
-        ControlEvent::KeyPose { name, quantize } => {
-            let Some(rotations) = poses.get(&name) else {
-                tracing::warn!("unknown key pose {name:?}");
-                return false;
-            };
+) {
+    match command {
+        MotionCommand::Temperature(t) => st.controls.temperature = t,
+        MotionCommand::BeatAccent(a) => st.controls.beat_accent = Some(a),
+        MotionCommand::KeyPose { pose, quantize } => {
             let target_s = quantize_target(
                 &quantize,
                 now_s,
@@ -220,24 +217,15 @@ fn apply(
                 st.transition_beats,
                 rate,
             );
-            st.key = Some(KeyPose {
-                rotations,
-                target_s,
-            });
+            st.key = Some(KeyPose { pose, target_s });
         }
-        ControlEvent::ClearKeyPose => st.key = None,
-        ControlEvent::TransitionBeats(b) if b.is_finite() && (0.0..=64.0).contains(&b) => {
-            st.transition_beats = b;
-        }
-        ControlEvent::StyleSeed(seed) => source.reset(seed),
-        ControlEvent::Pause => st.paused = true,
-        ControlEvent::Resume => st.paused = false,
-        ControlEvent::TempoHint(bpm) if bpm.is_finite() && (0.0..=400.0).contains(&bpm) => {
-            st.tempo_hint = bpm;
-        }
-        _ => return false,
+        MotionCommand::ClearKeyPose => st.key = None,
+        MotionCommand::TransitionBeats(b) => st.transition_beats = b,
+        MotionCommand::StyleSeed(seed) => source.reseed(seed),
+        MotionCommand::Pause => st.paused = true,
+        MotionCommand::Resume => st.paused = false,
+        MotionCommand::TempoHint(bpm) => st.tempo_hint = bpm,
     }
-    true
 }
 
 #[cfg(test)]

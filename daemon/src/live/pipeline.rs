@@ -1,28 +1,34 @@
 //! The live pipeline: analysis, motion and sender threads around the audio ring, started
 //! together and stopped together (one stop flag for Ctrl-C, `--duration` and tests).
 
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Instant;
 
 use anyhow::{Context, Result, anyhow};
-use crossbeam_channel::Receiver;
 use model::source::MotionSource;
 
-use super::analysis::{self, AnalysisSettings};
-use super::motion::{self, MotionSettings};
+use super::analysis::{self, AnalysisQueues, AnalysisSettings};
+use super::control_queue::ControlHub;
+use super::motion::{self, MotionQueues, MotionSettings};
 use super::ring::{RingReader, RingWriter, audio_ring};
-use super::scheduler::{self, SchedulerSettings};
-use super::sink::{FrameSink, PoseBank};
+use super::scheduler::{self, SchedulerSettings, SenderQueues};
+use super::sink::FrameSink;
 use super::stats::{Stats, StatsReport, process_cpu_s};
-use super::timeline::Timeline;
-use super::wire::ControlEvent;
 
 /// Interleaved samples the audio ring holds (≈ 2.7 s of 48 kHz stereo).
 pub const RING_SAMPLES: usize = 1 << 18;
 /// Blocks (markers) the audio ring holds.
 pub const RING_BLOCKS: usize = 4096;
+/// Feature frames the analysis → motion queue holds (40 s at 25 fps).
+pub const FEATURE_QUEUE: usize = 1024;
+/// Analysis events the analysis → sender queue holds.
+pub const EVENT_QUEUE: usize = 4096;
+/// Audio-clock anchors the analysis → sender queue holds (20 s of 256-frame blocks).
+pub const ANCHOR_QUEUE: usize = 4096;
+/// Poses the motion → sender queue holds (10 s at 25 fps).
+pub const POSE_QUEUE: usize = 256;
 
 /// Settings of a pipeline run.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,10 +111,9 @@ pub struct PipelineParts {
     pub source: Box<dyn MotionSource + Send>,
     /// Where frames and events go.
     pub sink: Box<dyn FrameSink>,
-    /// Live controls (OSC/MIDI receivers and tests send into it).
-    pub controls: Receiver<ControlEvent>,
-    /// Key poses by name.
-    pub poses: Box<dyn PoseBank + Send>,
+    /// The control path (its senders already handed to the OSC/MIDI inputs and tests), with
+    /// the key poses they resolve names to.
+    pub controls: ControlHub,
 }
 
 /// A running pipeline.
@@ -155,10 +160,11 @@ impl Pipeline {
         }
         let model_rate = parts.source.frame_rate();
         let declared = declared_lookahead_s(model_rate, parts.source.lookahead_frames(), 0);
-        let timeline = Arc::new(Mutex::new(Timeline::new(settings.speed)));
-        // Deep queues: seconds of frames, so a stalled thread loses nothing.
-        let (ftx, frx) = crossbeam_channel::bounded(1024);
-        let (etx, erx) = crossbeam_channel::bounded(4096);
+        // Wait-free SPSC queues, deep enough that only a stalled thread can fill one (counted).
+        let (features_tx, features_rx) = rtrb::RingBuffer::new(FEATURE_QUEUE);
+        let (events_tx, events_rx) = rtrb::RingBuffer::new(EVENT_QUEUE);
+        let (anchors_tx, anchors_rx) = rtrb::RingBuffer::new(ANCHOR_QUEUE);
+        let (poses_tx, poses_rx) = rtrb::RingBuffer::new(POSE_QUEUE);
         let spawn_err = |what: &str| format!("starting the {what} thread");
         let realtime = settings.realtime;
         let promote = move |priority: i32, stats: &Stats| {
@@ -166,66 +172,72 @@ impl Pipeline {
                 stats.realtime_threads.fetch_add(1, Ordering::Relaxed);
             }
         };
-        let analysis = {
-            let (tl, stats, stop, epoch) = (
-                timeline.clone(),
-                ctx.stats.clone(),
-                ctx.stop.clone(),
-                ctx.epoch,
-            );
-            let s = AnalysisSettings {
-                model_rate,
-                silence_after_s: settings.silence_after_s,
-            };
-            std::thread::Builder::new()
-                .name("danced-analysis".into())
-                .spawn(move || {
-                    promote(super::priority::ANALYSIS_PRIORITY, &stats);
-                    analysis::run(reader, s, epoch, tl, stats, stop, ftx, etx)
-                })
-                .with_context(|| spawn_err("analysis"))?
-        };
+        let PipelineParts {
+            source,
+            sink,
+            controls,
+        } = parts;
         let motion = {
-            let (tl, stats, stop, epoch) = (
-                timeline.clone(),
-                ctx.stats.clone(),
-                ctx.stop.clone(),
-                ctx.epoch,
-            );
+            let ctx = ctx.clone();
             let s = MotionSettings {
                 temperature: settings.temperature,
                 transition_beats: settings.transition_beats,
                 beat_accent: settings.beat_accent,
             };
-            let PipelineParts {
-                source,
-                controls,
-                poses,
-                ..
-            } = parts;
+            let (receiver, table) = controls.into_receiver();
+            let queues = MotionQueues {
+                features: features_rx,
+                controls: receiver,
+                poses: poses_tx,
+            };
+            ctx.stats.temperature.set(s.temperature);
+            ctx.stats.beat_accent.set(s.beat_accent.unwrap_or(f32::NAN));
             std::thread::Builder::new()
                 .name("danced-motion".into())
                 .spawn(move || {
-                    promote(super::priority::MOTION_PRIORITY, &stats);
-                    motion::run(source, poses, s, epoch, tl, stats, stop, frx, controls)
+                    promote(super::priority::MOTION_PRIORITY, &ctx.stats);
+                    motion::run(source, table, s, ctx, queues)
                 })
                 .with_context(|| spawn_err("motion"))?
         };
+        let analysis = {
+            let ctx = ctx.clone();
+            let s = AnalysisSettings {
+                model_rate,
+                silence_after_s: settings.silence_after_s,
+            };
+            let queues = AnalysisQueues {
+                features: features_tx,
+                events: events_tx,
+                anchors: anchors_tx,
+                motion_thread: motion.thread().clone(),
+            };
+            std::thread::Builder::new()
+                .name("danced-analysis".into())
+                .spawn(move || {
+                    promote(super::priority::ANALYSIS_PRIORITY, &ctx.stats);
+                    analysis::run(reader, s, ctx, queues)
+                })
+                .with_context(|| spawn_err("analysis"))?
+        };
         let sender = {
-            let (tl, stats, stop, epoch) =
-                (timeline, ctx.stats.clone(), ctx.stop.clone(), ctx.epoch);
+            let ctx = ctx.clone();
             let s = SchedulerSettings {
                 rate_hz: settings.rate_hz,
                 declared_lookahead_s: declared,
                 margin_s: settings.margin_ms * 1e-3,
                 speed: settings.speed,
             };
-            let sink = parts.sink;
+            let queues = SenderQueues {
+                anchors: anchors_rx,
+                poses: poses_rx,
+                events: events_rx,
+            };
             std::thread::Builder::new()
                 .name("danced-send".into())
                 .spawn(move || {
-                    promote(super::priority::SENDER_PRIORITY, &stats);
-                    scheduler::run(sink, s, epoch, tl, stats, stop, erx)
+                    promote(super::priority::SENDER_PRIORITY, &ctx.stats);
+                    scheduler::run(sink, s, ctx, queues)
                 })
                 .with_context(|| spawn_err("sender"))?
         };

@@ -3,18 +3,17 @@
 //! interpolates the poses around it, builds a [`BodyFrame`] in Unity coordinates and hands it,
 //! and any pending analysis events, to the sink.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant, SystemTime};
 
-use crossbeam_channel::Receiver;
 use glam::{Quat, Vec3};
 use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton, to_unity_position, to_unity_rotation};
 
+use super::pipeline::LiveContext;
 use super::sink::FrameSink;
-use super::stats::Stats;
-use super::timeline::Timeline;
+use super::timeline::{Anchor, TimedPose, Timeline};
 use super::wire::{AnalysisEvent, BodyFrame, BoneSample};
+use crate::alloc_counter::{CountGuard, RtThread};
 
 /// How long before a deadline the thread stops sleeping and spins (sleep overshoot margin).
 const SPIN_BEFORE: Duration = Duration::from_micros(400);
@@ -115,17 +114,24 @@ fn wait_until(deadline: Instant) {
     }
 }
 
+/// The sender thread's ends of its queues.
+pub struct SenderQueues {
+    /// The audio clock from the analysis thread.
+    pub anchors: rtrb::Consumer<Anchor>,
+    /// Poses from the motion thread.
+    pub poses: rtrb::Consumer<TimedPose>,
+    /// Analysis events from the analysis thread.
+    pub events: rtrb::Consumer<AnalysisEvent>,
+}
+
 /// Runs the sender thread until `stop` is set; gives the sink back at the end.
-#[allow(clippy::too_many_arguments)]
 pub fn run(
     mut sink: Box<dyn FrameSink>,
     settings: SchedulerSettings,
-    epoch: Instant,
-    timeline: Arc<Mutex<Timeline>>,
-    stats: Arc<Stats>,
-    stop: Arc<AtomicBool>,
-    events: Receiver<AnalysisEvent>,
+    ctx: LiveContext,
+    mut queues: SenderQueues,
 ) -> Box<dyn FrameSink> {
+    let LiveContext { epoch, stats, stop } = ctx;
     // Tighter timer slack makes the coarse sleep land closer to its deadline (Linux only).
     #[cfg(target_os = "linux")]
     // SAFETY: PR_SET_TIMERSLACK only changes this thread's timer slack.
@@ -136,16 +142,27 @@ pub fn run(
     let delay_ns =
         ((settings.declared_lookahead_s / settings.speed + settings.margin_s) * 1e9) as u64;
     let declared_wall_s = settings.declared_lookahead_s / settings.speed;
+    // The clock and the pose history are this thread's own: the other threads only queue.
+    let mut timeline = Timeline::new(settings.speed);
     let mut builder = FrameBuilder::new();
     let mut pose = Pose::rest();
     let mut index = 0u64;
     let mut last_t = f64::NEG_INFINITY;
+    let mut last_sent: Option<Instant> = None;
     let mut deadline = Instant::now() + period;
+    let _counting = CountGuard::new(RtThread::Sender);
     while !stop.load(Ordering::Relaxed) {
         wait_until(deadline);
-        let sent_at = Instant::now();
-        let now_ns = sent_at.duration_since(epoch).as_nanos() as u64;
-        let picked = timeline.lock().ok().and_then(|tl| {
+        let woke = Instant::now();
+        while let Ok(a) = queues.anchors.pop() {
+            timeline.anchors.push(a);
+        }
+        while let Ok(p) = queues.poses.pop() {
+            timeline.poses.push(p);
+        }
+        let now_ns = woke.duration_since(epoch).as_nanos() as u64;
+        let picked = (|| {
+            let tl = &timeline;
             let mut t = tl.audio_time_at(now_ns.saturating_sub(delay_ns), MAX_EXTRAPOLATION_S)?;
             if t <= last_t {
                 // The clock stalls when audio stops; frames still need increasing times.
@@ -156,12 +173,14 @@ pub fn run(
             let shown = if late { b.time_s } else { t };
             let ingest = tl.ingest_wall_ns(shown)?;
             Some((t, late, ingest))
-        });
+        })();
         if let Some((t, late, ingest_ns)) = picked {
             last_t = t;
             let frame = builder.build(index, t, &pose);
             sink.send_frame(frame);
-            let done_ns = epoch.elapsed().as_nanos() as u64;
+            // Stamped when the last send_to has returned: what a receiver can see.
+            let sent = Instant::now();
+            let done_ns = sent.duration_since(epoch).as_nanos() as u64;
             index += 1;
             stats.frames_sent.fetch_add(1, Ordering::Relaxed);
             if late {
@@ -169,25 +188,40 @@ pub fn run(
             }
             let latency = (done_ns as f64 - ingest_ns as f64) * 1e-9 - declared_wall_s;
             stats.latency.record_s(latency);
-            let jitter = if sent_at > deadline {
-                sent_at - deadline
-            } else {
-                deadline - sent_at
-            };
-            stats.jitter.record_s(jitter.as_secs_f64());
+            stats
+                .tick_to_sent
+                .record_s(sent.saturating_duration_since(deadline).as_secs_f64());
+            if let Some(prev) = last_sent {
+                let spacing = sent.duration_since(prev).as_secs_f64();
+                stats.jitter.record_s((spacing - period.as_secs_f64()).abs());
+            }
+            last_sent = Some(sent);
         }
-        while let Ok(e) = events.try_recv() {
+        while let Ok(e) = queues.events.pop() {
             sink.send_event(&e);
         }
         stats
             .packets_sent
             .store(sink.packets_sent(), Ordering::Relaxed);
+        let losses = sink.losses();
+        stats
+            .send_errors
+            .store(losses.send_errors, Ordering::Relaxed);
+        stats
+            .non_finite_replaced
+            .store(losses.non_finite_replaced, Ordering::Relaxed);
+        stats
+            .vrchat_missing_bones
+            .store(losses.vrchat_missing_bones, Ordering::Relaxed);
         deadline += period;
         let now = Instant::now();
         if now > deadline + period {
             // Fell more than a tick behind (machine stalled): rejoin the grid instead of bursting.
             let behind = (now - deadline).as_nanos() / period.as_nanos();
             deadline += period * behind as u32;
+            // The spacing across the stall is not jitter of the steady stream.
+            last_sent = None;
+            stats.sender_stalls.fetch_add(1, Ordering::Relaxed);
         }
     }
     sink

@@ -16,6 +16,21 @@ pub trait FrameSink: Send {
     fn send_event(&mut self, event: &AnalysisEvent);
     /// Packets put on the wire so far.
     fn packets_sent(&self) -> u64;
+    /// What the sink lost or repaired so far (all zero for sinks that cannot lose anything).
+    fn losses(&self) -> SinkLosses {
+        SinkLosses::default()
+    }
+}
+
+/// What a sink lost or repaired, as counted by its encoders and sockets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SinkLosses {
+    /// Datagrams the operating system refused.
+    pub send_errors: u64,
+    /// Non-finite values replaced before sending.
+    pub non_finite_replaced: u64,
+    /// VRChat trackers skipped because their bone was missing from the frame.
+    pub vrchat_missing_bones: u64,
 }
 
 /// Discards everything but counts what it was given (one "packet" per frame or event).
@@ -83,6 +98,8 @@ impl FrameSink for ChannelSink {
 pub trait PoseBank {
     /// The local rotation of every joint of the pose called `name`, if known.
     fn get(&self, name: &str) -> Option<[Quat; JOINT_COUNT]>;
+    /// Every pose name (read once, when a run is set up).
+    fn names(&self) -> Vec<String>;
 }
 
 /// A pose bank held in memory (tests, built-in poses).
@@ -117,5 +134,10 @@ impl MemoryPoseBank {
 impl PoseBank for MemoryPoseBank {
     fn get(&self, name: &str) -> Option<[Quat; JOINT_COUNT]> {
         self.poses.get(name).copied()
+    }
+    fn names(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.poses.keys().cloned().collect();
+        names.sort();
+        names
     }
 }

@@ -16,12 +16,49 @@
 //! - **processing latency** of a model frame: `pose_ready_wall − ingest_wall(S)`, where `S` is
 //!   the block that completed the newest feature frame the pose needed: how long analysis and
 //!   motion actually took (what the safety margin must cover).
-//! - **jitter** of a sent frame: `|send_wall − scheduled_wall|` on the scheduler's fixed grid.
+//! - **tick to sent** of a frame: `sent_wall − scheduled_wall`, where `sent_wall` is when the
+//!   frame's last `send_to` returned and `scheduled_wall` its tick on the sender's fixed grid:
+//!   the wake-up, the pose pick, forward kinematics, encoding and the system calls.
+//! - **jitter** of a sent frame: `|(sent_wall − previous sent_wall) − period|`, how unevenly
+//!   frames leave (what a receiver sees as uneven spacing), stamped when `send_to` returns.
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use serde::Serialize;
+
+use crate::alloc_counter::RtThread;
+
+/// Allocations (and frees) counted per real-time thread since the process started.
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq, Eq)]
+pub struct ThreadAllocations {
+    /// The capture callback (or the replay thread's writes).
+    pub capture: u64,
+    /// The analysis thread's loop.
+    pub analysis: u64,
+    /// The motion thread's loop.
+    pub motion: u64,
+    /// The sender thread's loop.
+    pub sender: u64,
+}
+
+impl ThreadAllocations {
+    /// The counts so far.
+    pub fn now() -> Self {
+        use crate::alloc_counter::allocations;
+        Self {
+            capture: allocations(RtThread::Capture),
+            analysis: allocations(RtThread::Analysis),
+            motion: allocations(RtThread::Motion),
+            sender: allocations(RtThread::Sender),
+        }
+    }
+
+    /// All threads together.
+    pub fn total(&self) -> u64 {
+        self.capture + self.analysis + self.motion + self.sender
+    }
+}
 
 /// A fixed-range histogram of durations with atomic buckets: recording never allocates or locks.
 pub struct Histogram {
@@ -121,17 +158,44 @@ pub struct Stats {
     pub latency: Histogram,
     /// Processing latency of model frames.
     pub processing: Histogram,
-    /// Send-time jitter of sent frames.
+    /// Send-time jitter of sent frames: |`send_to` returned − scheduled tick|.
     pub jitter: Histogram,
+    /// Tick to sent: scheduled tick → the frame's last datagram handed to the OS.
+    pub tick_to_sent: Histogram,
     dropped_frames: AtomicU64,
     /// Stream errors reported by the audio backend.
     pub stream_errors: AtomicU64,
     /// Times the capture stream was rebuilt.
     pub reconnects: AtomicU64,
+    /// Attempts to reopen a lost capture device that failed (it was still gone).
+    pub reconnect_failures: AtomicU64,
+    /// Times a capture stream stopped calling back and was rebuilt.
+    pub capture_stalls: AtomicU64,
+    /// Feature frames lost because the analysis → motion queue was full.
+    pub features_dropped: AtomicU64,
+    /// Audio-clock anchors lost because the analysis → sender queue was full.
+    pub anchors_dropped: AtomicU64,
+    /// Poses lost because the motion → sender queue was full.
+    pub poses_dropped: AtomicU64,
+    /// Control events lost because the queue to the motion thread was full.
+    pub controls_dropped: AtomicU64,
+    /// Parameter values (temperature, accent, seed, …) replaced by a newer one before the
+    /// motion thread applied them.
+    pub controls_coalesced: AtomicU64,
+    /// Control events refused by the per-address rate limit.
+    pub controls_rate_limited: AtomicU64,
+    /// Datagrams the operating system refused to send.
+    pub send_errors: AtomicU64,
+    /// Non-finite values the encoders replaced before sending.
+    pub non_finite_replaced: AtomicU64,
+    /// VRChat trackers skipped because their bone was missing from a frame.
+    pub vrchat_missing_bones: AtomicU64,
     /// Frames handed to the sink.
     pub frames_sent: AtomicU64,
     /// Frames whose pose was not ready at send time (the newest pose was held).
     pub late_frames: AtomicU64,
+    /// Times the sender fell more than a tick behind and skipped ticks to rejoin its grid.
+    pub sender_stalls: AtomicU64,
     /// Packets the sink reports.
     pub packets_sent: AtomicU64,
     /// Model frames stepped.
@@ -176,11 +240,24 @@ impl Stats {
             latency: Histogram::new(-20.0, 180.0, 20.0),
             processing: Histogram::new(0.0, 200.0, 20.0),
             jitter: Histogram::new(0.0, 50.0, 5.0),
+            tick_to_sent: Histogram::new(0.0, 50.0, 5.0),
             dropped_frames: AtomicU64::new(0),
             stream_errors: AtomicU64::new(0),
             reconnects: AtomicU64::new(0),
+            reconnect_failures: AtomicU64::new(0),
+            capture_stalls: AtomicU64::new(0),
+            features_dropped: AtomicU64::new(0),
+            anchors_dropped: AtomicU64::new(0),
+            poses_dropped: AtomicU64::new(0),
+            controls_dropped: AtomicU64::new(0),
+            controls_coalesced: AtomicU64::new(0),
+            controls_rate_limited: AtomicU64::new(0),
+            send_errors: AtomicU64::new(0),
+            non_finite_replaced: AtomicU64::new(0),
+            vrchat_missing_bones: AtomicU64::new(0),
             frames_sent: AtomicU64::new(0),
             late_frames: AtomicU64::new(0),
+            sender_stalls: AtomicU64::new(0),
             packets_sent: AtomicU64::new(0),
             model_frames: AtomicU64::new(0),
             silence_frames: AtomicU64::new(0),
@@ -242,6 +319,9 @@ impl Stats {
             jitter_ms_p50: self.jitter.quantile_ms(0.5),
             jitter_ms_p99: self.jitter.quantile_ms(0.99),
             jitter_ms_max: self.jitter.max_ms(),
+            tick_to_sent_ms_p50: self.tick_to_sent.quantile_ms(0.5),
+            tick_to_sent_ms_p99: self.tick_to_sent.quantile_ms(0.99),
+            tick_to_sent_ms_max: self.tick_to_sent.max_ms(),
             cpu_percent: if wall_s > 0.0 {
                 100.0 * cpu_s / wall_s
             } else {
@@ -255,13 +335,26 @@ impl Stats {
             drops: self.dropped_frames(),
             stream_errors: load(&self.stream_errors),
             reconnects: load(&self.reconnects),
+            reconnect_failures: load(&self.reconnect_failures),
+            capture_stalls: load(&self.capture_stalls),
+            features_dropped: load(&self.features_dropped),
+            anchors_dropped: load(&self.anchors_dropped),
+            poses_dropped: load(&self.poses_dropped),
+            controls_dropped: load(&self.controls_dropped),
+            controls_coalesced: load(&self.controls_coalesced),
+            controls_rate_limited: load(&self.controls_rate_limited),
+            send_errors: load(&self.send_errors),
+            non_finite_replaced: load(&self.non_finite_replaced),
+            vrchat_missing_bones: load(&self.vrchat_missing_bones),
             frames_sent: load(&self.frames_sent),
             late_frames: load(&self.late_frames),
+            sender_stalls: load(&self.sender_stalls),
             model_frames: load(&self.model_frames),
             silence_frames: load(&self.silence_frames),
             packets_sent: load(&self.packets_sent),
             events_dropped: load(&self.events_dropped),
-            callback_allocations: crate::alloc_counter::callback_allocations(),
+            callback_allocations: crate::alloc_counter::allocations(RtThread::Capture),
+            allocations: ThreadAllocations::now(),
             allocation_counting: crate::alloc_counter::is_installed(),
             controls_accepted: load(&self.controls_accepted),
             controls_rejected: load(&self.controls_rejected),
@@ -270,6 +363,8 @@ impl Stats {
             osc_control_ignored: 0,
             midi_events: 0,
             midi_bytes_dropped: 0,
+            midi_skipped: 0,
+            midi_queue_full: 0,
         }
     }
 }
@@ -297,6 +392,12 @@ pub struct StatsReport {
     pub jitter_ms_p99: f64,
     /// Send jitter, maximum, ms.
     pub jitter_ms_max: f64,
+    /// Scheduled tick → frame sent, median, ms.
+    pub tick_to_sent_ms_p50: f64,
+    /// Scheduled tick → frame sent, 99th percentile, ms.
+    pub tick_to_sent_ms_p99: f64,
+    /// Scheduled tick → frame sent, maximum, ms.
+    pub tick_to_sent_ms_max: f64,
     /// Process CPU time over wall time, percent of one core.
     pub cpu_percent: f64,
     /// Resident set size at the first sample, bytes.
@@ -315,10 +416,34 @@ pub struct StatsReport {
     pub stream_errors: u64,
     /// Capture stream rebuilds.
     pub reconnects: u64,
+    /// Failed attempts to reopen a lost capture device.
+    pub reconnect_failures: u64,
+    /// Capture streams that stopped calling back and were rebuilt.
+    pub capture_stalls: u64,
+    /// Feature frames lost on the way to the motion thread (queue full).
+    pub features_dropped: u64,
+    /// Audio-clock anchors lost on the way to the sender (queue full).
+    pub anchors_dropped: u64,
+    /// Poses lost on the way to the sender (queue full).
+    pub poses_dropped: u64,
+    /// Control events lost on the way to the motion thread (queue full).
+    pub controls_dropped: u64,
+    /// Parameter values replaced by a newer one before they were applied.
+    pub controls_coalesced: u64,
+    /// Control events refused by the per-address rate limit.
+    pub controls_rate_limited: u64,
+    /// Datagrams the operating system refused to send.
+    pub send_errors: u64,
+    /// Non-finite values the encoders replaced.
+    pub non_finite_replaced: u64,
+    /// VRChat trackers skipped because their bone was missing.
+    pub vrchat_missing_bones: u64,
     /// Pose frames sent.
     pub frames_sent: u64,
     /// Sent frames whose pose was late (held).
     pub late_frames: u64,
+    /// Times the sender skipped ticks after falling behind.
+    pub sender_stalls: u64,
     /// Model frames stepped.
     pub model_frames: u64,
     /// Frames of silence inserted while no audio arrived.
@@ -327,8 +452,10 @@ pub struct StatsReport {
     pub packets_sent: u64,
     /// Analysis events dropped on the way to the sink.
     pub events_dropped: u64,
-    /// Allocations in the audio callback path.
+    /// Allocations in the audio callback path (the capture thread of `allocations`).
     pub callback_allocations: u64,
+    /// Allocations and frees counted in each real-time thread's steady-state loop.
+    pub allocations: ThreadAllocations,
     /// Whether allocations were counted at all (the counting allocator is installed).
     pub allocation_counting: bool,
     /// Control events applied.
@@ -345,6 +472,10 @@ pub struct StatsReport {
     pub midi_events: u64,
     /// MIDI bytes the parser dropped (garbage, truncated messages).
     pub midi_bytes_dropped: u64,
+    /// MIDI messages too long to read (system exclusive), skipped.
+    pub midi_skipped: u64,
+    /// MIDI messages lost because the queue from the MIDI driver's thread was full.
+    pub midi_queue_full: u64,
 }
 
 /// Resident set size of this process, bytes (Linux `/proc/self/statm`; `None` elsewhere).

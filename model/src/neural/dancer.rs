@@ -403,6 +403,11 @@ impl MotionSource for NeuralDancer {
         self.glide_left = 0;
         self.foot_lock.reset();
     }
+
+    fn reseed(&mut self, seed: u64) {
+        // The correlated noise carries on from its current value, so the pose glides.
+        self.rng = Rng::new(seed);
+    }
 }
 
 /// A beat accent depth in [0, 0.9] (non-finite: 0).

@@ -1,0 +1,445 @@
+//! The performer's controls on their way to the motion thread, kept off its real-time path:
+//! each input (OSC receiver, MIDI, a test) owns a [`ControlSender`] that validates values
+//! against the one range of each parameter, resolves key-pose names to indices, rate-limits
+//! events per address, and hands the motion thread only `Copy` data through wait-free queues.
+//!
+//! Parameters (temperature, accent, transition length, tempo hint, seed) are coalesced: each
+//! has one slot holding its newest value, so a fader or a flood of seeds can never fill a
+//! queue or delay a key pose; a value replaced before the motion thread took it is counted.
+//! Events (key pose, clear, pause, resume) go through one SPSC ring per input, each
+//! rate-limited per address; a full ring or an exceeded limit is counted, never blocks.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Instant;
+
+use glam::Quat;
+use model::rig::JOINT_COUNT;
+use protocols::control::{
+    BEAT_ACCENT_RANGE, TEMPERATURE_RANGE, TEMPO_HINT_RANGE, TRANSITION_BEATS_RANGE,
+};
+
+use super::sink::PoseBank;
+use super::stats::Stats;
+use super::wire::{ControlEvent, Quantize};
+
+/// Events one input may queue before the motion thread takes them.
+const QUEUE_CAPACITY: usize = 256;
+/// Events per address an input may send in a burst, and per second after it.
+const RATE_BURST: f64 = 32.0;
+/// See [`RATE_BURST`].
+const RATE_PER_S: f64 = 32.0;
+
+/// A control the motion thread applies: plain data, names already resolved.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MotionCommand {
+    /// New temperature (within the parameter's range).
+    Temperature(f32),
+    /// New beat accent.
+    BeatAccent(f32),
+    /// New transition length for key poses reached "now", beats.
+    TransitionBeats(f32),
+    /// New tempo hint, BPM.
+    TempoHint(f32),
+    /// New style seed: the dance goes on, its randomness restarts.
+    StyleSeed(u64),
+    /// Reach the key pose at this index of the pose table.
+    KeyPose {
+        /// Index in [`ControlHub::table`]'s order.
+        pose: u16,
+        /// When.
+        quantize: Quantize,
+    },
+    /// Drop the pending key pose.
+    ClearKeyPose,
+    /// Freeze.
+    Pause,
+    /// Unfreeze.
+    Resume,
+}
+
+/// One parameter's newest value, written by any input, taken by the motion thread.
+#[derive(Debug, Default)]
+struct ParamSlot {
+    bits: AtomicU64,
+    pending: AtomicBool,
+}
+
+impl ParamSlot {
+    /// Offers a value; returns true when it replaced one not yet taken.
+    fn offer(&self, bits: u64) -> bool {
+        self.bits.store(bits, Ordering::Release);
+        self.pending.swap(true, Ordering::AcqRel)
+    }
+
+    fn take(&self) -> Option<u64> {
+        self.pending
+            .swap(false, Ordering::AcqRel)
+            .then(|| self.bits.load(Ordering::Acquire))
+    }
+}
+
+/// The coalescing slots, shared by every sender and the receiver.
+#[derive(Debug, Default)]
+struct Params {
+    temperature: ParamSlot,
+    accent: ParamSlot,
+    transition: ParamSlot,
+    tempo_hint: ParamSlot,
+    seed: ParamSlot,
+}
+
+/// Builds the control path before a run: hands out one sender per input, then becomes the
+/// motion thread's [`ControlReceiver`].
+pub struct ControlHub {
+    params: Arc<Params>,
+    names: Arc<HashMap<String, u16>>,
+    table: Vec<[Quat; JOINT_COUNT]>,
+    consumers: Vec<rtrb::Consumer<MotionCommand>>,
+    stats: Arc<Stats>,
+}
+
+impl ControlHub {
+    /// A hub resolving names in `poses` and counting into `stats`.
+    pub fn new(poses: &dyn PoseBank, stats: Arc<Stats>) -> Self {
+        let mut names = HashMap::new();
+        let mut table = Vec::new();
+        for name in poses.names() {
+            if let Some(rotations) = poses.get(&name)
+                && table.len() < usize::from(u16::MAX)
+            {
+                names.insert(name, table.len() as u16);
+                table.push(rotations);
+            }
+        }
+        Self {
+            params: Arc::new(Params::default()),
+            names: Arc::new(names),
+            table,
+            consumers: Vec::new(),
+            stats,
+        }
+    }
+
+    /// A sender for one more input (each input thread owns its own).
+    pub fn sender(&mut self) -> ControlSender {
+        let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
+        self.consumers.push(consumer);
+        ControlSender {
+            producer,
+            params: self.params.clone(),
+            names: self.names.clone(),
+            stats: self.stats.clone(),
+            buckets: [TokenBucket::new(); 3],
+        }
+    }
+
+    /// The key poses by index, for the motion thread.
+    pub fn table(&self) -> &[[Quat; JOINT_COUNT]] {
+        &self.table
+    }
+
+    /// The motion thread's end, with the pose table.
+    pub fn into_receiver(self) -> (ControlReceiver, Vec<[Quat; JOINT_COUNT]>) {
+        (
+            ControlReceiver {
+                params: self.params,
+                consumers: self.consumers,
+            },
+            self.table,
+        )
+    }
+}
+
+/// A token bucket: [`RATE_BURST`] events at once, [`RATE_PER_S`] a second after that.
+#[derive(Clone, Copy, Debug)]
+struct TokenBucket {
+    tokens: f64,
+    last: Option<Instant>,
+}
+
+impl TokenBucket {
+    fn new() -> Self {
+        Self {
+            tokens: RATE_BURST,
+            last: None,
+        }
+    }
+
+    fn allow(&mut self, now: Instant) -> bool {
+        if let Some(last) = self.last {
+            let dt = now.saturating_duration_since(last).as_secs_f64();
+            self.tokens = (self.tokens + dt * RATE_PER_S).min(RATE_BURST);
+        }
+        self.last = Some(now);
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// Why a control was not passed on.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ControlRefusal {
+    /// No key pose of that name.
+    UnknownPose(String),
+    /// A value outside its parameter's range, or not finite.
+    OutOfRange,
+    /// More events to this address than the rate limit allows.
+    RateLimited,
+    /// The queue to the motion thread is full.
+    QueueFull,
+}
+
+/// One input's end of the control path (not `Clone`: each input gets its own from the hub).
+pub struct ControlSender {
+    producer: rtrb::Producer<MotionCommand>,
+    params: Arc<Params>,
+    names: Arc<HashMap<String, u16>>,
+    stats: Arc<Stats>,
+    /// Key pose, clear, pause/resume.
+    buckets: [TokenBucket; 3],
+}
+
+fn in_range(x: f32, (lo, hi): (f32, f32)) -> bool {
+    x.is_finite() && (lo..=hi).contains(&x)
+}
+
+impl ControlSender {
+    /// Validates, resolves and passes on one control; every outcome is counted in the stats
+    /// (`controls_accepted`, `controls_rejected`, `controls_coalesced`,
+    /// `controls_rate_limited`, `controls_dropped`).
+    pub fn send(&mut self, event: ControlEvent) -> Result<(), ControlRefusal> {
+        let r = self.pass_on(event);
+        let s = &self.stats;
+        let counter = match &r {
+            Ok(()) => &s.controls_accepted,
+            Err(ControlRefusal::UnknownPose(_) | ControlRefusal::OutOfRange) => {
+                &s.controls_rejected
+            }
+            Err(ControlRefusal::RateLimited) => &s.controls_rate_limited,
+            Err(ControlRefusal::QueueFull) => &s.controls_dropped,
+        };
+        counter.fetch_add(1, Ordering::Relaxed);
+        r
+    }
+
+    fn offer(&self, slot: &ParamSlot, bits: u64) {
+        if slot.offer(bits) {
+            self.stats.controls_coalesced.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    fn pass_on(&mut self, event: ControlEvent) -> Result<(), ControlRefusal> {
+        let p = &self.params;
+        let float = |x: f32, range| {
+            in_range(x, range)
+                .then_some(u64::from(x.to_bits()))
+                .ok_or(ControlRefusal::OutOfRange)
+        };
+        let (bucket, command) = match event {
+            ControlEvent::Temperature(t) => {
+                self.offer(&p.temperature, float(t, TEMPERATURE_RANGE)?);
+                return Ok(());
+            }
+            ControlEvent::BeatAccent(a) => {
+                self.offer(&p.accent, float(a, BEAT_ACCENT_RANGE)?);
+                return Ok(());
+            }
+            ControlEvent::TransitionBeats(b) => {
+                if b <= TRANSITION_BEATS_RANGE.0 {
+                    return Err(ControlRefusal::OutOfRange);
+                }
+                self.offer(&p.transition, float(b, TRANSITION_BEATS_RANGE)?);
+                return Ok(());
+            }
+            ControlEvent::TempoHint(bpm) => {
+                self.offer(&p.tempo_hint, float(bpm, TEMPO_HINT_RANGE)?);
+                return Ok(());
+            }
+            ControlEvent::StyleSeed(seed) => {
+                self.offer(&p.seed, seed);
+                return Ok(());
+            }
+            ControlEvent::KeyPose { name, quantize } => {
+                let Some(&pose) = self.names.get(&name) else {
+                    return Err(ControlRefusal::UnknownPose(name));
+                };
+                (0, MotionCommand::KeyPose { pose, quantize })
+            }
+            ControlEvent::ClearKeyPose => (1, MotionCommand::ClearKeyPose),
+            ControlEvent::Pause => (2, MotionCommand::Pause),
+            ControlEvent::Resume => (2, MotionCommand::Resume),
+        };
+        if !self.buckets[bucket].allow(Instant::now()) {
+            return Err(ControlRefusal::RateLimited);
+        }
+        self.producer
+            .push(command)
+            .map_err(|_| ControlRefusal::QueueFull)
+    }
+}
+
+/// The motion thread's end: takes coalesced parameters and queued events without waiting.
+pub struct ControlReceiver {
+    params: Arc<Params>,
+    consumers: Vec<rtrb::Consumer<MotionCommand>>,
+}
+
+impl ControlReceiver {
+    /// Calls `apply` for every parameter changed and every event queued since the last poll
+    /// (parameters first, so a key pose uses the newest transition length); never allocates.
+    pub fn poll(&mut self, mut apply: impl FnMut(MotionCommand)) {
+        let p = &self.params;
+        let f = |bits: u64| f32::from_bits(bits as u32);
+        if let Some(b) = p.temperature.take() {
+            apply(MotionCommand::Temperature(f(b)));
+        }
+        if let Some(b) = p.accent.take() {
+            apply(MotionCommand::BeatAccent(f(b)));
+        }
+        if let Some(b) = p.transition.take() {
+            apply(MotionCommand::TransitionBeats(f(b)));
+        }
+        if let Some(b) = p.tempo_hint.take() {
+            apply(MotionCommand::TempoHint(f(b)));
+        }
+        if let Some(seed) = p.seed.take() {
+            apply(MotionCommand::StyleSeed(seed));
+        }
+        for c in &mut self.consumers {
+            while let Ok(command) = c.pop() {
+                apply(command);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::live::sink::MemoryPoseBank;
+
+    fn hub() -> (ControlHub, Arc<Stats>) {
+        let stats = Arc::new(Stats::new());
+        (
+            ControlHub::new(&MemoryPoseBank::builtin(), stats.clone()),
+            stats,
+        )
+    }
+
+    fn drain(rx: &mut ControlReceiver) -> Vec<MotionCommand> {
+        let mut got = Vec::new();
+        rx.poll(|c| got.push(c));
+        got
+    }
+
+    #[test]
+    fn names_resolve_to_indices_and_unknown_names_are_counted() {
+        let (mut hub, stats) = hub();
+        let mut tx = hub.sender();
+        let arms_up = hub.names["arms_up"];
+        let (mut rx, table) = hub.into_receiver();
+        assert_eq!(table.len(), 2);
+        let key = |name: &str| ControlEvent::KeyPose {
+            name: name.into(),
+            quantize: Quantize::NextBar,
+        };
+        assert_eq!(tx.send(key("arms_up")), Ok(()));
+        assert_eq!(
+            tx.send(key("nope")),
+            Err(ControlRefusal::UnknownPose("nope".into()))
+        );
+        assert_eq!(
+            drain(&mut rx),
+            vec![MotionCommand::KeyPose {
+                pose: arms_up,
+                quantize: Quantize::NextBar
+            }]
+        );
+        assert_eq!(stats.controls_accepted.load(Ordering::Relaxed), 1);
+        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 1);
+    }
+
+    #[test]
+    fn a_flood_of_parameters_coalesces_to_the_newest_value() {
+        let (mut hub, stats) = hub();
+        let mut tx = hub.sender();
+        let (mut rx, _) = hub.into_receiver();
+        for i in 0..10_000u64 {
+            tx.send(ControlEvent::StyleSeed(i)).unwrap();
+            tx.send(ControlEvent::Temperature((i % 200) as f32 / 100.0))
+                .unwrap();
+        }
+        tx.send(ControlEvent::Pause).unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![
+                MotionCommand::Temperature(1.99),
+                MotionCommand::StyleSeed(9_999),
+                MotionCommand::Pause
+            ]
+        );
+        assert_eq!(stats.controls_coalesced.load(Ordering::Relaxed), 19_998);
+        assert!(drain(&mut rx).is_empty());
+    }
+
+    #[test]
+    fn events_are_rate_limited_per_address_and_out_of_range_values_refused() {
+        let (mut hub, stats) = hub();
+        let mut tx = hub.sender();
+        let (mut rx, _) = hub.into_receiver();
+        let mut limited = 0;
+        for _ in 0..100 {
+            if tx.send(ControlEvent::ClearKeyPose) == Err(ControlRefusal::RateLimited) {
+                limited += 1;
+            }
+        }
+        // A burst of 32 passes (plus whatever refilled in the microseconds the loop took).
+        assert!((60..=68).contains(&limited), "{limited}");
+        // Another address has its own budget.
+        assert_eq!(tx.send(ControlEvent::Pause), Ok(()));
+        assert_eq!(
+            stats.controls_rate_limited.load(Ordering::Relaxed),
+            limited as u64
+        );
+        assert!(drain(&mut rx).len() >= 33);
+        for bad in [
+            ControlEvent::Temperature(f32::NAN),
+            ControlEvent::Temperature(2.5),
+            ControlEvent::BeatAccent(0.95),
+            ControlEvent::TransitionBeats(0.0),
+            ControlEvent::TransitionBeats(65.0),
+            ControlEvent::TempoHint(20.0),
+        ] {
+            assert_eq!(tx.send(bad.clone()), Err(ControlRefusal::OutOfRange), "{bad:?}");
+        }
+        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 6);
+    }
+
+    #[test]
+    fn a_full_queue_is_counted_not_waited_on() {
+        let (mut hub, stats) = hub();
+        let mut tx = hub.sender();
+        let _rx = hub.into_receiver();
+        let mut full = 0;
+        // Spread over time so the rate limit is not what refuses them.
+        for i in 0..QUEUE_CAPACITY + 10 {
+            tx.buckets[2] = TokenBucket::new();
+            let e = if i % 2 == 0 {
+                ControlEvent::Pause
+            } else {
+                ControlEvent::Resume
+            };
+            if tx.send(e) == Err(ControlRefusal::QueueFull) {
+                full += 1;
+            }
+        }
+        assert_eq!(full, 10);
+        assert_eq!(stats.controls_dropped.load(Ordering::Relaxed), 10);
+    }
+}
