@@ -174,6 +174,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     report.midi_events = counters.midi_events.load(Ordering::Relaxed);
     report.midi_bytes_dropped = counters.midi_dropped.load(Ordering::Relaxed);
     report.midi_skipped = counters.midi_skipped.load(Ordering::Relaxed);
+    report.osc_control_refused_sources = counters.osc_refused_sources.load(Ordering::Relaxed);
     report.midi_queue_full = counters.midi_queue_full.load(Ordering::Relaxed);
     for h in [replay_handle, capture_handle].into_iter().flatten() {
         if h.join().is_err() {
@@ -196,31 +197,39 @@ fn replay_settings(config: &Config, looped: bool) -> ReplaySettings {
     }
 }
 
-/// The end-of-run summary, one fact per line.
+/// The end-of-run summary, one fact per line; every loss counter appears, zero or not.
 pub fn summary(r: &StatsReport) -> String {
     let mb = |b: u64| b as f64 / 1_048_576.0;
+    let a = &r.allocations;
     format!(
-        "ran         {:.1} s, {} frames sent ({:.1} Hz), {} model frames, {} late\n\
-         latency     p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (added, beyond the declared look-ahead)\n\
-         processing  p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (audio in → pose ready)\n\
-         jitter      p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms\n\
-         cpu         {:.1} % of one core, {} threads at real-time priority\n\
-         memory      RSS start {:.1} MiB, end {:.1} MiB, max {:.1} MiB (first minute max {:.1}, last minute max {:.1})\n\
-         audio       {} frames dropped, {} stream errors, {} reconnects, {} frames of silence inserted\n\
-         callback    {} allocations{}\n\
-         packets     {} sent, {} events dropped; controls {} applied, {} rejected\n\
-         control in  OSC {} accepted, {} ignored; MIDI {} events, {} bytes dropped",
+        "ran          {:.1} s, {} frames sent ({:.1} Hz), {} model frames, {} late, {} sender stalls\n\
+         latency      p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (added, beyond the declared look-ahead)\n\
+         processing   p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (audio in → pose ready)\n\
+         tick to sent p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms (scheduled tick → send_to returned)\n\
+         jitter       p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms (frame spacing − period, at send_to)\n\
+         cpu          {:.1} % of one core, {} threads at real-time priority\n\
+         memory       RSS start {:.1} MiB, end {:.1} MiB, max {:.1} MiB (first minute max {:.1}, last minute max {:.1})\n\
+         allocations  capture {}, analysis {}, motion {}, sender {}{}\n\
+         audio        {} frames dropped, {} stream errors, {} stalls, {} reconnects ({} failed tries), {} frames of silence inserted\n\
+         queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
+         packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
+         controls     {} applied, {} rejected, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
+         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full)",
         r.wall_s,
         r.frames_sent,
         r.frames_sent as f64 / r.wall_s.max(1e-9),
         r.model_frames,
         r.late_frames,
+        r.sender_stalls,
         r.latency_ms_p50,
         r.latency_ms_p99,
         r.latency_ms_max,
         r.processing_ms_p50,
         r.processing_ms_p99,
         r.processing_ms_max,
+        r.tick_to_sent_ms_p50,
+        r.tick_to_sent_ms_p99,
+        r.tick_to_sent_ms_max,
         r.jitter_ms_p50,
         r.jitter_ms_p99,
         r.jitter_ms_max,
@@ -231,23 +240,40 @@ pub fn summary(r: &StatsReport) -> String {
         mb(r.rss_max),
         mb(r.rss_first_minute_max),
         mb(r.rss_last_minute_max),
-        r.drops,
-        r.stream_errors,
-        r.reconnects,
-        r.silence_frames,
-        r.callback_allocations,
+        a.capture,
+        a.analysis,
+        a.motion,
+        a.sender,
         if r.allocation_counting {
             ""
         } else {
             " (not counted: no counting allocator)"
         },
-        r.packets_sent,
+        r.drops,
+        r.stream_errors,
+        r.capture_stalls,
+        r.reconnects,
+        r.reconnect_failures,
+        r.silence_frames,
+        r.features_dropped,
+        r.anchors_dropped,
+        r.poses_dropped,
         r.events_dropped,
+        r.packets_sent,
+        r.send_errors,
+        r.non_finite_replaced,
+        r.vrchat_missing_bones,
         r.controls_accepted,
         r.controls_rejected,
+        r.controls_coalesced,
+        r.controls_rate_limited,
+        r.controls_dropped,
         r.osc_control_accepted,
         r.osc_control_ignored,
+        r.osc_control_refused_sources,
         r.midi_events,
         r.midi_bytes_dropped,
+        r.midi_skipped,
+        r.midi_queue_full,
     )
 }

@@ -3,7 +3,7 @@
 use crate::control::{ControlEvent, ControlParser};
 use crate::error::ProtocolError;
 use std::io;
-use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
+use std::net::{IpAddr, Ipv4Addr, SocketAddr, UdpSocket};
 
 /// The control port when none is configured (clear of VMC's 39539/39540 and VRChat's 9000/9001).
 pub const DEFAULT_CONTROL_PORT: u16 = 9010;
@@ -19,6 +19,8 @@ pub struct ControlReceiver {
     buf: Vec<u8>,
     datagrams: u64,
     receive_errors: u64,
+    allow: Vec<IpAddr>,
+    refused_sources: u64,
 }
 
 impl ControlReceiver {
@@ -43,7 +45,20 @@ impl ControlReceiver {
             buf: vec![0; MAX_DATAGRAM],
             datagrams: 0,
             receive_errors: 0,
+            allow: Vec::new(),
+            refused_sources: 0,
         })
+    }
+
+    /// Accepts datagrams only from these source addresses (empty: from anyone who can reach
+    /// the port). Others are dropped unparsed and counted in [`Self::refused_sources`].
+    pub fn set_allowed_sources(&mut self, allow: Vec<IpAddr>) {
+        self.allow = allow;
+    }
+
+    /// Datagrams dropped because their source is not allowed.
+    pub fn refused_sources(&self) -> u64 {
+        self.refused_sources
     }
 
     /// The bound address (the real port when bound to port 0).
@@ -73,8 +88,12 @@ impl ControlReceiver {
         // Bounded so a flood cannot keep the caller here forever.
         for _ in 0..1024 {
             match self.socket.recv_from(&mut self.buf) {
-                Ok((n, _)) => {
+                Ok((n, from)) => {
                     self.datagrams += 1;
+                    if !self.allow.is_empty() && !self.allow.contains(&from.ip()) {
+                        self.refused_sources += 1;
+                        continue;
+                    }
                     self.parser.parse(&self.buf[..n], out);
                 }
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
@@ -125,6 +144,32 @@ mod tests {
         assert_eq!(rx.datagrams(), 3);
         assert_eq!(rx.parser().malformed(), 1);
         assert_eq!(rx.parser().accepted(), 2);
+    }
+
+    #[test]
+    fn sources_outside_the_allowlist_are_refused_and_counted() {
+        let mut rx = ControlReceiver::localhost(0).unwrap();
+        let addr = rx.local_addr().unwrap();
+        rx.set_allowed_sources(vec!["127.0.0.2".parse().unwrap()]);
+        let bytes = rosc::encoder::encode(&OscPacket::Message(OscMessage {
+            addr: "/danced/control/pause".into(),
+            args: vec![],
+        }))
+        .unwrap();
+        let tx = UdpSocket::bind("127.0.0.1:0").unwrap();
+        tx.send_to(&bytes, addr).unwrap();
+        let mut out = Vec::new();
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while rx.datagrams() < 1 && Instant::now() < deadline {
+            rx.poll(&mut out);
+        }
+        assert_eq!((out.len(), rx.refused_sources()), (0, 1));
+        rx.set_allowed_sources(vec!["127.0.0.1".parse().unwrap()]);
+        tx.send_to(&bytes, addr).unwrap();
+        while out.is_empty() && Instant::now() < deadline {
+            rx.poll(&mut out);
+        }
+        assert_eq!(out, vec![ControlEvent::Pause]);
     }
 
     #[test]

@@ -179,6 +179,8 @@ pub struct ControlConfig {
     pub osc_port: u16,
     /// Address the OSC control receiver binds to.
     pub bind: String,
+    /// Source addresses allowed to send control (empty: anyone who can reach the port).
+    pub allow: Vec<std::net::IpAddr>,
     /// Substring of the MIDI input port's name (off when absent).
     pub midi_port: Option<String>,
     /// MIDI mapping file (default: the built-in generic map, `configs/midi/generic.toml`).
@@ -192,6 +194,7 @@ impl Default for ControlConfig {
         Self {
             osc_port: 9010,
             bind: "127.0.0.1".into(),
+            allow: Vec::new(),
             midi_port: None,
             midi_map: None,
             poses: None,

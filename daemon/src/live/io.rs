@@ -121,6 +121,8 @@ pub struct ControlCounters {
     pub osc_accepted: AtomicU64,
     /// OSC packets or messages ignored (malformed, unknown address, bad arguments).
     pub osc_ignored: AtomicU64,
+    /// OSC datagrams from sources outside `control.allow`, dropped unread.
+    pub osc_refused_sources: AtomicU64,
     /// MIDI messages turned into control events.
     pub midi_events: AtomicU64,
     /// MIDI bytes dropped by the parser (running status gone wrong, truncated messages).
@@ -165,14 +167,19 @@ impl ControlInputs {
             let mut receiver = ControlReceiver::bind(addr, ControlParser::default())
                 .with_context(|| format!("listening for OSC control on {addr}"))?;
             inputs.osc_addr = receiver.local_addr().ok();
-            if !receiver
-                .local_addr()
-                .is_ok_and(|a| a.ip().is_loopback())
-            {
-                tracing::warn!(
-                    "OSC control listens on {addr}, beyond this machine: anyone on the network \
-                     can steer the dancer (set control.allow to the controllers' addresses)"
-                );
+            receiver.set_allowed_sources(config.control.allow.clone());
+            if !addr.ip().is_loopback() {
+                if config.control.allow.is_empty() {
+                    tracing::warn!(
+                        "OSC control listens on {addr}, beyond this machine: anyone on the \
+                         network can steer the dancer (control.allow lists the controllers)"
+                    );
+                } else {
+                    tracing::warn!(
+                        "OSC control listens on {addr}, beyond this machine, for {:?} only",
+                        config.control.allow
+                    );
+                }
             }
             let (mut tx, stop, counters) = (hub.sender(), stop.clone(), counters.clone());
             inputs.threads.push(
@@ -197,6 +204,9 @@ impl ControlInputs {
                                 p.malformed() + p.unknown_address() + p.bad_arguments(),
                                 Ordering::Relaxed,
                             );
+                            counters
+                                .osc_refused_sources
+                                .store(receiver.refused_sources(), Ordering::Relaxed);
                         }
                     })?,
             );

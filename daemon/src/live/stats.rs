@@ -361,6 +361,7 @@ impl Stats {
             realtime_threads: load(&self.realtime_threads),
             osc_control_accepted: 0,
             osc_control_ignored: 0,
+            osc_control_refused_sources: 0,
             midi_events: 0,
             midi_bytes_dropped: 0,
             midi_skipped: 0,
@@ -468,6 +469,8 @@ pub struct StatsReport {
     pub osc_control_accepted: u64,
     /// OSC control packets or messages ignored (malformed, unknown address, wrong arguments).
     pub osc_control_ignored: u64,
+    /// OSC control datagrams from sources outside `control.allow`.
+    pub osc_control_refused_sources: u64,
     /// Control events made from MIDI input.
     pub midi_events: u64,
     /// MIDI bytes the parser dropped (garbage, truncated messages).

@@ -1,0 +1,203 @@
+//! The proof behind "no allocation on the real-time path": a live run of the whole pipeline,
+//! as `danced demo` runs it, with every output (native OSC, VMC with split bundles, VRChat
+//! trackers) and OSC control traffic arriving on the control port, counted by a counting
+//! global allocator per real-time thread. One test in this binary, so nothing else counts.
+
+use std::net::{SocketAddr, UdpSocket};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use daemon::alloc_counter::{self, RtThread};
+use daemon::live::config::Config;
+use daemon::live::stats::{StatsReport, ThreadAllocations};
+use daemon::live_cli::{AudioSource, RunMode, run_live};
+use rosc::{OscMessage, OscPacket, OscType};
+
+#[global_allocator]
+static ALLOCATOR: alloc_counter::CountingAllocator = alloc_counter::CountingAllocator;
+
+/// Wall seconds of each run (the issue asks for at least 20).
+const RUN_S: f64 = 21.0;
+
+/// A UDP receiver counting datagrams on a thread of its own.
+struct Receiver {
+    addr: SocketAddr,
+    datagrams: Arc<AtomicU64>,
+    thread: JoinHandle<()>,
+}
+
+fn receiver(stop: &Arc<AtomicBool>) -> Receiver {
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
+    let addr = socket.local_addr().unwrap();
+    let datagrams = Arc::new(AtomicU64::new(0));
+    let (count, stop) = (datagrams.clone(), stop.clone());
+    let thread = std::thread::spawn(move || {
+        let mut buf = [0u8; 65_536];
+        while !stop.load(Ordering::Relaxed) {
+            if socket.recv(&mut buf).is_ok() {
+                count.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    });
+    Receiver {
+        addr,
+        datagrams,
+        thread,
+    }
+}
+
+fn free_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A controller: every 40 ms a temperature or accent move, every second a key pose, every
+/// 1.5 s a new seed, now and then a pause, a tempo hint, an unknown pose and garbage.
+fn controller(port: u16, stop: Arc<AtomicBool>) -> JoinHandle<u64> {
+    std::thread::spawn(move || {
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let to = SocketAddr::from(([127, 0, 0, 1], port));
+        let send = |addr: &str, args: Vec<OscType>| {
+            let packet = OscPacket::Message(OscMessage {
+                addr: format!("/danced/control/{addr}"),
+                args,
+            });
+            let _ = socket.send_to(&rosc::encoder::encode(&packet).unwrap(), to);
+        };
+        let mut sent = 0u64;
+        let mut i = 0u64;
+        while !stop.load(Ordering::Relaxed) {
+            std::thread::sleep(Duration::from_millis(40));
+            i += 1;
+            let x = (i % 50) as f32 / 50.0;
+            send("temperature", vec![OscType::Float(0.2 + x)]);
+            send("accent", vec![OscType::Float(0.5 * x)]);
+            sent += 2;
+            if i % 25 == 0 {
+                let pose = format!("pose-{}", 1 + (i / 25) % 16);
+                let when = ["beat", "bar", "now"][(i / 25 % 3) as usize];
+                send("keypose", vec![OscType::String(pose), OscType::String(when.into())]);
+                send("transition", vec![OscType::Float(1.0 + x)]);
+                sent += 2;
+            }
+            if i % 37 == 0 {
+                send("seed", vec![OscType::Int(i as i32)]);
+                send("tempo", vec![OscType::Float(120.0)]);
+                send("keypose", vec![OscType::String("no-such-pose".into())]);
+                let _ = socket.send_to(b"not osc", to);
+                sent += 4;
+            }
+            if i % 150 == 0 {
+                send("pause", vec![]);
+                send("resume", vec![]);
+                send("keypose/clear", vec![]);
+                sent += 3;
+            }
+        }
+        sent
+    })
+}
+
+struct LiveRun {
+    report: StatsReport,
+    received: [u64; 3],
+    control_sent: u64,
+}
+
+fn live_run(source: &'static str) -> JoinHandle<LiveRun> {
+    std::thread::spawn(move || {
+        let stop = Arc::new(AtomicBool::new(false));
+        let receivers = [receiver(&stop), receiver(&stop), receiver(&stop)];
+        let mut config = Config::default();
+        config.output.osc = vec![receivers[0].addr.to_string()];
+        config.output.vmc.target = receivers[1].addr.to_string();
+        config.output.vmc.split_bundles = true;
+        config.output.vrchat.enabled = true;
+        config.output.vrchat.target = receivers[2].addr.to_string();
+        config.control.osc_port = free_port();
+        config.audio.duration = Some(RUN_S);
+        config.dancer.source = source.into();
+        let control = controller(config.control.osc_port, stop.clone());
+        let report = run_live(&config, AudioSource::Demo, RunMode::Quiet).unwrap();
+        stop.store(true, Ordering::Relaxed);
+        let control_sent = control.join().unwrap();
+        let received = receivers.map(|r| {
+            r.thread.join().unwrap();
+            r.datagrams.load(Ordering::Relaxed)
+        });
+        LiveRun {
+            report,
+            received,
+            control_sent,
+        }
+    })
+}
+
+#[test]
+fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_traffic() {
+    alloc_counter::mark_installed();
+    // First: the counter counts. A deliberate allocation in each thread's role is seen.
+    let before = ThreadAllocations::now();
+    for role in [
+        RtThread::Capture,
+        RtThread::Analysis,
+        RtThread::Motion,
+        RtThread::Sender,
+    ] {
+        alloc_counter::counted(role, || {
+            std::hint::black_box(Vec::<u8>::with_capacity(10));
+        });
+    }
+    // Allocations outside a counted region are not counted.
+    std::hint::black_box(Vec::<u8>::with_capacity(10));
+    let after = ThreadAllocations::now();
+    for (b, a) in [
+        (before.capture, after.capture),
+        (before.analysis, after.analysis),
+        (before.motion, after.motion),
+        (before.sender, after.sender),
+    ] {
+        assert_eq!(a - b, 2, "one allocation and its free, counted once each");
+    }
+
+    // Then: two live runs at once, the neural and the retrieval dancer, 21 s each.
+    let runs = [live_run("neural"), live_run("retrieval")].map(|h| h.join().unwrap());
+    let counted = ThreadAllocations::now();
+    let during = ThreadAllocations {
+        capture: counted.capture - after.capture,
+        analysis: counted.analysis - after.analysis,
+        motion: counted.motion - after.motion,
+        sender: counted.sender - after.sender,
+    };
+    for run in &runs {
+        let r = &run.report;
+        // The report carries the same per-thread counts (process-wide, so they include the
+        // deliberate allocations above).
+        assert_eq!(r.allocations.total() - after.total(), 0, "{:?}", r.allocations);
+        assert!(r.allocation_counting);
+        assert!(r.frames_sent as f64 > 55.0 * RUN_S, "{} frames", r.frames_sent);
+        assert!(r.model_frames as f64 > 20.0 * RUN_S, "{} steps", r.model_frames);
+        // Every output got datagrams: native bundles and events, VMC split into several
+        // bundles a frame, VRChat one message per tracker and value.
+        assert!(run.received[0] > r.frames_sent, "native {:?}", run.received);
+        assert!(run.received[1] > 2 * r.frames_sent, "vmc {:?}", run.received);
+        assert!(run.received[2] > 10 * r.frames_sent, "vrchat {:?}", run.received);
+        // The control traffic went through the real path.
+        assert!(r.osc_control_accepted > run.control_sent / 2, "{r:?}");
+        assert!(r.controls_accepted > 100 && r.controls_rejected > 0, "{r:?}");
+        assert_eq!(
+            (r.drops, r.features_dropped, r.anchors_dropped, r.poses_dropped),
+            (0, 0, 0, 0),
+            "{r:?}"
+        );
+    }
+    assert_eq!(during, ThreadAllocations::default(), "allocations during the runs");
+}
