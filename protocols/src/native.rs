@@ -5,8 +5,8 @@ use crate::address::normalise_prefix;
 use crate::error::ProtocolError;
 use crate::finite;
 use crate::frame::{AnalysisEvent, BodyFrame};
+use crate::osc_writer::OscWriter;
 use crate::timetag::osc_time;
-use rosc::{OscBundle, OscMessage, OscPacket, OscType};
 
 /// The address prefix used when none is configured.
 pub const DEFAULT_NATIVE_PREFIX: &str = "/danced";
@@ -17,6 +17,7 @@ pub struct NativeEncoder {
     prefix: String,
     buf: Vec<u8>,
     replaced_non_finite: u64,
+    clamped_values: u64,
 }
 
 impl Default for NativeEncoder {
@@ -25,6 +26,7 @@ impl Default for NativeEncoder {
             prefix: DEFAULT_NATIVE_PREFIX.to_string(),
             buf: Vec::with_capacity(4096),
             replaced_non_finite: 0,
+            clamped_values: 0,
         }
     }
 }
@@ -48,37 +50,72 @@ impl NativeEncoder {
         self.replaced_non_finite
     }
 
-    /// The frame as one OSC bundle timetagged with `frame.timetag`.
-    pub fn frame_packet(&mut self, frame: &BodyFrame) -> OscPacket {
-        let mut content = Vec::with_capacity(frame.bones.len() + 2);
-        let time = self.checked64(frame.audio_time_s);
-        content.push(self.message(
-            "/frame",
-            vec![
-                // i32 is all the CHOP reads; wrapping at 2^31 frames is years away at 60 fps.
-                OscType::Int((frame.frame_index & 0x7fff_ffff) as i32),
-                OscType::Float(time),
-            ],
-        ));
-        let (p, q) = self.checked_pose(frame.root_position, frame.root_rotation);
-        content.push(self.message("/root", floats(&[p.x, p.y, p.z, q.x, q.y, q.z, q.w])));
-        for bone in &frame.bones {
-            let (p, _) = self.checked_pose(bone.world_position, glam::Quat::IDENTITY);
-            let (_, q) = self.checked_pose(glam::Vec3::ZERO, bone.local_rotation);
-            let addr = format!("{}/joint/{}", self.prefix, bone.bone);
-            content.push(OscPacket::Message(OscMessage {
-                addr,
-                args: floats(&[p.x, p.y, p.z, q.x, q.y, q.z, q.w]),
-            }));
-        }
-        OscPacket::Bundle(OscBundle {
-            timetag: osc_time(frame.timetag),
-            content,
-        })
+    /// How many integers were beyond int32 and sent as `i32::MAX` (beat index, beats per bar).
+    pub fn clamped_values(&self) -> u64 {
+        self.clamped_values
     }
 
-    /// The analysis event as one OSC message (no bundle: events are not scheduled).
-    pub fn event_packet(&mut self, event: &AnalysisEvent) -> OscPacket {
+    /// The frame's bundle encoded; the slice borrows a buffer reused by the next call.
+    pub fn encode_frame(&mut self, frame: &BodyFrame) -> &[u8] {
+        let mut buf = std::mem::take(&mut self.buf);
+        self.write_frame(frame, &mut buf);
+        self.buf = buf;
+        &self.buf
+    }
+
+    /// The event's message encoded; the slice borrows a buffer reused by the next call.
+    pub fn encode_event(&mut self, event: &AnalysisEvent) -> &[u8] {
+        let mut buf = std::mem::take(&mut self.buf);
+        self.write_event(event, &mut buf);
+        self.buf = buf;
+        &self.buf
+    }
+
+    /// The frame as one OSC bundle timetagged with `frame.timetag`, replacing `buf`'s contents;
+    /// allocates only when `buf` must grow.
+    pub fn write_frame(&mut self, frame: &BodyFrame, buf: &mut Vec<u8>) {
+        buf.clear();
+        let time = self.checked64(frame.audio_time_s);
+        let (root_p, root_q) = self.checked_pose(frame.root_position, frame.root_rotation);
+        let prefix = self.prefix.as_str();
+        let mut w = OscWriter::new(buf);
+        w.bundle_header(osc_time(frame.timetag));
+        let e = w.begin_element();
+        // i32 is all the CHOP reads; wrapping at 2^31 frames is years away at 60 fps.
+        w.string(&[prefix, "/frame"])
+            .string(&[",if"])
+            .int((frame.frame_index & 0x7fff_ffff) as i32)
+            .float(time);
+        w.end_element(e);
+        let e = w.begin_element();
+        w.string(&[prefix, "/root"])
+            .string(&[POSE_TAGS])
+            .floats(&pose_args(root_p, root_q));
+        w.end_element(e);
+        for bone in &frame.bones {
+            // Each half checked on its own: only these two halves go out.
+            let (p, _) = checked_pose(
+                &mut self.replaced_non_finite,
+                bone.world_position,
+                glam::Quat::IDENTITY,
+            );
+            let (_, q) = checked_pose(
+                &mut self.replaced_non_finite,
+                glam::Vec3::ZERO,
+                bone.local_rotation,
+            );
+            let e = w.begin_element();
+            w.string(&[prefix, "/joint/", bone.bone])
+                .string(&[POSE_TAGS])
+                .floats(&pose_args(p, q));
+            w.end_element(e);
+        }
+    }
+
+    /// The analysis event as one OSC message (no bundle: events are not scheduled), replacing
+    /// `buf`'s contents; allocates only when `buf` must grow.
+    pub fn write_event(&mut self, event: &AnalysisEvent, buf: &mut Vec<u8>) {
+        buf.clear();
         match *event {
             AnalysisEvent::Beat {
                 time_s,
@@ -86,64 +123,48 @@ impl NativeEncoder {
                 beats_per_bar,
                 tempo_bpm,
             } => {
+                let index = self.clamp_i32(index_in_bar);
+                let per_bar = self.clamp_i32(beats_per_bar);
                 let tempo = self.checked(tempo_bpm);
                 let time = self.checked64(time_s);
-                self.message(
-                    "/beat",
-                    vec![
-                        OscType::Int(clamp_i32(index_in_bar)),
-                        OscType::Int(clamp_i32(beats_per_bar)),
-                        OscType::Float(tempo),
-                        OscType::Float(time),
-                    ],
-                )
+                OscWriter::new(buf)
+                    .string(&[&self.prefix, "/beat"])
+                    .string(&[",iiff"])
+                    .int(index)
+                    .int(per_bar)
+                    .float(tempo)
+                    .float(time);
             }
             AnalysisEvent::Onset { time_s, strength } => {
-                let args = floats(&[self.checked(strength), self.checked64(time_s)]);
-                self.message("/onset", args)
+                let args = [self.checked(strength), self.checked64(time_s)];
+                self.write_floats(buf, "/onset", &args);
             }
             AnalysisEvent::Tempo { bpm, confidence } => {
-                let args = floats(&[self.checked(bpm), self.checked(confidence)]);
-                self.message("/tempo", args)
+                let args = [self.checked(bpm), self.checked(confidence)];
+                self.write_floats(buf, "/tempo", &args);
             }
             AnalysisEvent::Chroma { chroma, .. } => {
                 let mut values = [0.0f32; 12];
                 for (v, c) in values.iter_mut().zip(chroma) {
                     *v = self.checked(c);
                 }
-                self.message("/chroma", floats(&values))
+                self.write_floats(buf, "/chroma", &values);
             }
             AnalysisEvent::Energy { db, .. } => {
-                let args = floats(&[self.checked(db)]);
-                self.message("/energy", args)
+                let args = [self.checked(db)];
+                self.write_floats(buf, "/energy", &args);
             }
         }
     }
 
-    /// The frame's bundle encoded; the slice borrows a buffer reused by the next call.
-    pub fn encode_frame(&mut self, frame: &BodyFrame) -> &[u8] {
-        let packet = self.frame_packet(frame);
-        self.encode(&packet)
-    }
-
-    /// The event's message encoded; the slice borrows a buffer reused by the next call.
-    pub fn encode_event(&mut self, event: &AnalysisEvent) -> &[u8] {
-        let packet = self.event_packet(event);
-        self.encode(&packet)
-    }
-
-    fn encode(&mut self, packet: &OscPacket) -> &[u8] {
-        self.buf.clear();
-        // Encoding into a Vec<u8> cannot fail (its error type is Infallible).
-        let _ = rosc::encoder::encode_into(packet, &mut self.buf);
-        &self.buf
-    }
-
-    fn message(&self, suffix: &str, args: Vec<OscType>) -> OscPacket {
-        OscPacket::Message(OscMessage {
-            addr: format!("{}{}", self.prefix, suffix),
-            args,
-        })
+    fn write_floats(&self, buf: &mut Vec<u8>, suffix: &str, values: &[f32]) {
+        const TAGS: &str = ",ffffffffffff";
+        // Only events with 1..=12 float arguments come here.
+        let tags = TAGS.get(..1 + values.len()).unwrap_or(TAGS);
+        OscWriter::new(buf)
+            .string(&[&self.prefix, suffix])
+            .string(&[tags])
+            .floats(values);
     }
 
     fn checked(&mut self, x: f32) -> f32 {
@@ -162,20 +183,29 @@ impl NativeEncoder {
     }
 
     fn checked_pose(&mut self, p: glam::Vec3, q: glam::Quat) -> (glam::Vec3, glam::Quat) {
-        if !finite::is_finite_pose(p, q) {
-            self.replaced_non_finite += 1;
-        }
-        (finite::vec3(p), finite::quat(q))
+        checked_pose(&mut self.replaced_non_finite, p, q)
+    }
+
+    fn clamp_i32(&mut self, x: u32) -> i32 {
+        i32::try_from(x).unwrap_or_else(|_| {
+            self.clamped_values += 1;
+            i32::MAX
+        })
     }
 }
 
-/// Float arguments from a slice.
-pub(crate) fn floats(values: &[f32]) -> Vec<OscType> {
-    values.iter().map(|&v| OscType::Float(v)).collect()
+/// Type tags of a position and a rotation.
+const POSE_TAGS: &str = ",fffffff";
+
+fn pose_args(p: glam::Vec3, q: glam::Quat) -> [f32; 7] {
+    [p.x, p.y, p.z, q.x, q.y, q.z, q.w]
 }
 
-fn clamp_i32(x: u32) -> i32 {
-    x.min(i32::MAX as u32) as i32
+fn checked_pose(replaced: &mut u64, p: glam::Vec3, q: glam::Quat) -> (glam::Vec3, glam::Quat) {
+    if !finite::is_finite_pose(p, q) {
+        *replaced += 1;
+    }
+    (finite::vec3(p), finite::quat(q))
 }
 
 #[cfg(test)]
@@ -184,7 +214,116 @@ mod tests {
     use crate::frame::BoneSample;
     use glam::{Quat, Vec3};
     use rosc::decoder::decode_udp;
+    use rosc::{OscBundle, OscMessage, OscPacket, OscType};
     use std::time::{Duration, UNIX_EPOCH};
+
+    fn floats(values: &[f32]) -> Vec<OscType> {
+        values.iter().map(|&v| OscType::Float(v)).collect()
+    }
+
+    /// The frame as the rosc-based encoder this one replaced built it.
+    fn rosc_frame(prefix: &str, frame: &BodyFrame) -> Vec<u8> {
+        let pose = |p: Vec3, q: Quat| {
+            let (p, q) = (finite::vec3(p), finite::quat(q));
+            floats(&[p.x, p.y, p.z, q.x, q.y, q.z, q.w])
+        };
+        let mut content = vec![
+            OscMessage {
+                addr: format!("{prefix}/frame"),
+                args: vec![
+                    OscType::Int((frame.frame_index & 0x7fff_ffff) as i32),
+                    OscType::Float(finite::scalar64(frame.audio_time_s)),
+                ],
+            },
+            OscMessage {
+                addr: format!("{prefix}/root"),
+                args: pose(frame.root_position, frame.root_rotation),
+            },
+        ];
+        for b in &frame.bones {
+            content.push(OscMessage {
+                addr: format!("{prefix}/joint/{}", b.bone),
+                args: pose(b.world_position, b.local_rotation),
+            });
+        }
+        rosc::encoder::encode(&OscPacket::Bundle(OscBundle {
+            timetag: osc_time(frame.timetag),
+            content: content.into_iter().map(OscPacket::Message).collect(),
+        }))
+        .unwrap()
+    }
+
+    #[test]
+    fn frames_are_byte_identical_to_the_rosc_encoding() {
+        let mut f = frame();
+        for prefix in ["/danced", "/a/b", "/"] {
+            let mut enc = NativeEncoder::with_prefix(prefix).unwrap();
+            let want = rosc_frame(enc.prefix(), &f);
+            assert_eq!(enc.encode_frame(&f), &want[..], "prefix {prefix:?}");
+        }
+        f.frame_index = u64::MAX;
+        f.audio_time_s = f64::INFINITY;
+        f.root_rotation = Quat::from_xyzw(0.0, 0.0, 0.0, 0.0);
+        f.bones[1].world_position.z = f32::NAN;
+        f.bones.push(BoneSample {
+            bone: "RightToes",
+            ..f.bones[0]
+        });
+        let mut enc = NativeEncoder::default();
+        let mut buf = vec![1, 2, 3];
+        enc.write_frame(&f, &mut buf);
+        assert_eq!(buf, rosc_frame("/danced", &f));
+    }
+
+    #[test]
+    fn events_are_byte_identical_to_the_rosc_encoding() {
+        let mut enc = NativeEncoder::default();
+        let mut chroma = [0.25; 12];
+        chroma[3] = f32::NAN;
+        let cases = [
+            (
+                AnalysisEvent::Beat {
+                    time_s: 3.0,
+                    index_in_bar: 2,
+                    beats_per_bar: u32::MAX,
+                    tempo_bpm: 128.0,
+                },
+                "/danced/beat",
+                vec![
+                    OscType::Int(2),
+                    OscType::Int(i32::MAX),
+                    OscType::Float(128.0),
+                    OscType::Float(3.0),
+                ],
+            ),
+            (
+                AnalysisEvent::Onset {
+                    time_s: 1e300,
+                    strength: 0.75,
+                },
+                "/danced/onset",
+                floats(&[0.75, 0.0]),
+            ),
+            (
+                AnalysisEvent::Chroma {
+                    time_s: 0.0,
+                    chroma,
+                },
+                "/danced/chroma",
+                floats(&chroma.map(finite::scalar)),
+            ),
+        ];
+        for (event, addr, args) in cases {
+            let want = rosc::encoder::encode(&OscPacket::Message(OscMessage {
+                addr: addr.into(),
+                args,
+            }))
+            .unwrap();
+            assert_eq!(enc.encode_event(&event), &want[..], "{event:?}");
+        }
+        assert_eq!(enc.clamped_values(), 1);
+        assert_eq!(enc.replaced_non_finite(), 2);
+    }
 
     pub(crate) fn frame() -> BodyFrame {
         let bone = |name, x: f32| BoneSample {

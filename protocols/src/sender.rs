@@ -3,6 +3,8 @@
 use crate::error::ProtocolError;
 use crate::frame::{AnalysisEvent, BodyFrame};
 use crate::native::NativeEncoder;
+use crate::output_counters::OutputCounters;
+use crate::packet_pool::PacketPool;
 use crate::vmc::VmcEncoder;
 use crate::vrchat::VrchatEncoder;
 use std::io;
@@ -62,8 +64,12 @@ pub fn parse_target(kind: TargetKind, host_port: &str) -> Result<OscTarget, Prot
     Ok(OscTarget { kind, addr })
 }
 
-/// Sends every frame to every target in the layout it expects, counting what went out and what
-/// failed; never blocks and never panics on network trouble.
+/// Largest UDP payload over IPv4; anything longer is refused by the operating system.
+pub const MAX_UDP_PAYLOAD: usize = 65_507;
+
+/// Sends every frame to every target in the layout it expects, counting what went out, what
+/// failed and what was altered; never blocks, never panics on network trouble, and once warm
+/// (after the first frame) never allocates, so it can run on a real-time thread.
 #[derive(Debug)]
 pub struct OscOutput {
     socket_v4: UdpSocket,
@@ -72,10 +78,18 @@ pub struct OscOutput {
     native: NativeEncoder,
     vmc: VmcEncoder,
     vrchat: VrchatEncoder,
-    packets: Vec<Vec<u8>>,
+    // Buffers reused frame after frame, never shrunk, so sending does not allocate.
+    pool: PacketPool,
+    sent: SendCounters,
+}
+
+/// The socket side of the counters (the encoders keep the rest).
+#[derive(Debug, Default)]
+struct SendCounters {
     packets_sent: u64,
     bytes_sent: u64,
     send_errors: u64,
+    oversized_packets: u64,
     last_error: Option<io::ErrorKind>,
 }
 
@@ -105,11 +119,8 @@ impl OscOutput {
             native,
             vmc,
             vrchat,
-            packets: Vec::new(),
-            packets_sent: 0,
-            bytes_sent: 0,
-            send_errors: 0,
-            last_error: None,
+            pool: PacketPool::new(),
+            sent: SendCounters::default(),
         };
         for t in targets {
             out.add_target(t)?;
@@ -136,24 +147,39 @@ impl OscOutput {
         self.socket_v4.local_addr()
     }
 
+    /// Every counter of this output and its encoders.
+    pub fn counters(&self) -> OutputCounters {
+        OutputCounters {
+            packets_sent: self.sent.packets_sent,
+            bytes_sent: self.sent.bytes_sent,
+            send_errors: self.sent.send_errors,
+            oversized_packets: self.sent.oversized_packets,
+            non_finite_replaced: self.native.replaced_non_finite()
+                + self.vmc.replaced_non_finite()
+                + self.vrchat.replaced_non_finite(),
+            clamped_values: self.native.clamped_values(),
+            vrchat_missing_bones: self.vrchat.missing_bones(),
+        }
+    }
+
     /// UDP datagrams handed to the operating system.
     pub fn packets_sent(&self) -> u64 {
-        self.packets_sent
+        self.sent.packets_sent
     }
 
     /// Bytes in those datagrams (OSC payload only).
     pub fn bytes_sent(&self) -> u64 {
-        self.bytes_sent
+        self.sent.bytes_sent
     }
 
     /// Datagrams the operating system refused (buffer full, unreachable, refused, too big).
     pub fn send_errors(&self) -> u64 {
-        self.send_errors
+        self.sent.send_errors
     }
 
     /// The kind of the most recent send error, for a log line.
     pub fn last_error(&self) -> Option<io::ErrorKind> {
-        self.last_error
+        self.sent.last_error
     }
 
     /// Sends the frame to every target; each layout is encoded at most once per frame.
@@ -164,16 +190,11 @@ impl OscOutput {
             }
             match kind {
                 TargetKind::Native => {
-                    self.packets.truncate(1);
-                    if self.packets.is_empty() {
-                        self.packets.push(Vec::new());
-                    }
-                    let bytes = self.native.encode_frame(frame);
-                    self.packets[0].clear();
-                    self.packets[0].extend_from_slice(bytes);
+                    self.pool.clear();
+                    self.native.write_frame(frame, self.pool.next_packet());
                 }
-                TargetKind::Vmc => self.vmc.encode_frame_into(frame, &mut self.packets),
-                TargetKind::Vrchat => self.vrchat.encode_frame_into(frame, &mut self.packets),
+                TargetKind::Vmc => self.vmc.write_frame(frame, &mut self.pool),
+                TargetKind::Vrchat => self.vrchat.write_frame(frame, &mut self.pool),
             }
             self.send_packets(kind);
         }
@@ -184,13 +205,8 @@ impl OscOutput {
         if !self.targets.iter().any(|t| t.kind == TargetKind::Native) {
             return;
         }
-        let bytes = self.native.encode_event(event);
-        self.packets.truncate(1);
-        if self.packets.is_empty() {
-            self.packets.push(Vec::new());
-        }
-        self.packets[0].clear();
-        self.packets[0].extend_from_slice(bytes);
+        self.pool.clear();
+        self.native.write_event(event, self.pool.next_packet());
         self.send_packets(TargetKind::Native);
     }
 
@@ -200,15 +216,18 @@ impl OscOutput {
                 (SocketAddr::V6(_), Some(v6)) => v6,
                 _ => &self.socket_v4,
             };
-            for packet in &self.packets {
+            for packet in self.pool.packets() {
                 match socket.send_to(packet, target.addr) {
                     Ok(n) => {
-                        self.packets_sent += 1;
-                        self.bytes_sent += n as u64;
+                        self.sent.packets_sent += 1;
+                        self.sent.bytes_sent += n as u64;
                     }
                     Err(e) => {
-                        self.send_errors += 1;
-                        self.last_error = Some(e.kind());
+                        self.sent.send_errors += 1;
+                        if packet.len() > MAX_UDP_PAYLOAD {
+                            self.sent.oversized_packets += 1;
+                        }
+                        self.sent.last_error = Some(e.kind());
                     }
                 }
             }

@@ -3,16 +3,19 @@
 
 use crate::finite;
 use crate::frame::BodyFrame;
+use crate::osc_writer::{BUNDLE_HEADER_BYTES, ELEMENT_HEADER_BYTES, OscWriter, string_len};
+use crate::packet_pool::PacketPool;
 use crate::timetag::osc_time;
-use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+use rosc::OscTime;
 
 /// Largest encoded bundle when splitting: fits an Ethernet MTU with IPv4/IPv6 and UDP headers.
 pub const MAX_SPLIT_BUNDLE_BYTES: usize = 1400;
 
-/// Bytes of a bundle before its elements: "#bundle\0" and the timetag.
-const BUNDLE_HEADER_BYTES: usize = 16;
-/// Bytes in front of each element of a bundle: its size.
-const ELEMENT_HEADER_BYTES: usize = 4;
+const ROOT_ADDR: &str = "/VMC/Ext/Root/Pos";
+const BONE_ADDR: &str = "/VMC/Ext/Bone/Pos";
+const POSE_TAGS: &str = ",sfffffff";
+const OK_ADDR: &str = "/VMC/Ext/OK";
+const TIME_ADDR: &str = "/VMC/Ext/T";
 
 /// Encodes frames as VMC Performer bundles.
 #[derive(Clone, Debug, Default)]
@@ -20,7 +23,6 @@ pub struct VmcEncoder {
     /// Emit several bundles of at most [`MAX_SPLIT_BUNDLE_BYTES`] instead of one, so that one lost
     /// IP fragment on Wi-Fi does not lose the whole frame.
     pub split_bundles: bool,
-    messages: Vec<(OscPacket, usize)>,
     replaced_non_finite: u64,
 }
 
@@ -40,71 +42,46 @@ impl VmcEncoder {
 
     /// The frame's packets, freshly allocated.
     pub fn encode_frame(&mut self, frame: &BodyFrame) -> Vec<Vec<u8>> {
-        let mut out = Vec::new();
-        self.encode_frame_into(frame, &mut out);
-        out
+        let mut pool = PacketPool::new();
+        self.write_frame(frame, &mut pool);
+        pool.into_packets()
     }
 
     /// The frame's packets written into `out`, whose inner buffers are reused; `out` ends up
-    /// holding exactly this frame's packets.
+    /// holding exactly this frame's packets (spare buffers are freed: the real-time path uses
+    /// [`Self::write_frame`], which keeps them).
     pub fn encode_frame_into(&mut self, frame: &BodyFrame, out: &mut Vec<Vec<u8>>) {
-        self.collect_messages(frame);
-        let timetag = osc_time(frame.timetag);
-        let mut used = 0;
-        if !self.split_bundles {
-            let content = self.messages.drain(..).map(|(m, _)| m).collect();
-            write_bundle(out, &mut used, timetag, content);
-        } else {
-            // Greedy packing keeps message order, so Root stays first and OK/T stay last, which
-            // receivers that apply on /VMC/Ext/OK rely on.
-            let mut content = Vec::new();
-            let mut size = BUNDLE_HEADER_BYTES;
-            for (message, len) in self.messages.drain(..) {
-                let element = ELEMENT_HEADER_BYTES + len;
-                if !content.is_empty() && size + element > MAX_SPLIT_BUNDLE_BYTES {
-                    write_bundle(out, &mut used, timetag, std::mem::take(&mut content));
-                    size = BUNDLE_HEADER_BYTES;
-                }
-                content.push(message);
-                size += element;
-            }
-            if !content.is_empty() {
-                write_bundle(out, &mut used, timetag, content);
-            }
-        }
-        out.truncate(used);
+        let mut pool = PacketPool::from(std::mem::take(out));
+        self.write_frame(frame, &mut pool);
+        *out = pool.into_packets();
     }
 
-    fn collect_messages(&mut self, frame: &BodyFrame) {
-        self.messages.clear();
+    /// The frame's packets, replacing the pool's; allocates only while the pool grows.
+    pub fn write_frame(&mut self, frame: &BodyFrame, pool: &mut PacketPool) {
+        pool.clear();
+        let mut bundles = Bundles {
+            pool,
+            timetag: osc_time(frame.timetag),
+            split: self.split_bundles,
+        };
         // The avatar root stays at the origin: the Hips bone's local transform already carries
         // the dancer's world position and rotation, and receivers (EVMC4U, VSeeFace, ...) apply
         // Root and Hips both, so sending the travel in Root too would count it twice.
         let _ = (frame.root_position, frame.root_rotation);
-        self.push(
-            "/VMC/Ext/Root/Pos",
-            "root",
-            &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
-        );
+        bundles.pose(ROOT_ADDR, "root", &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
         for bone in &frame.bones {
             let (p, q) = self.pose(bone.local_position, bone.local_rotation);
-            self.push(
-                "/VMC/Ext/Bone/Pos",
-                bone.bone,
-                &[p.x, p.y, p.z, q.x, q.y, q.z, q.w],
-            );
+            bundles.pose(BONE_ADDR, bone.bone, &[p.x, p.y, p.z, q.x, q.y, q.z, q.w]);
         }
-        self.push_message(OscMessage {
-            addr: "/VMC/Ext/OK".into(),
-            args: vec![OscType::Int(1)],
+        bundles.element(string_len(&[OK_ADDR]) + string_len(&[",i"]) + 4, |w| {
+            w.string(&[OK_ADDR]).string(&[",i"]).int(1);
         });
         let t = finite::scalar64(frame.audio_time_s);
         if !(frame.audio_time_s as f32).is_finite() {
             self.replaced_non_finite += 1;
         }
-        self.push_message(OscMessage {
-            addr: "/VMC/Ext/T".into(),
-            args: vec![OscType::Float(t)],
+        bundles.element(string_len(&[TIME_ADDR]) + string_len(&[",f"]) + 4, |w| {
+            w.string(&[TIME_ADDR]).string(&[",f"]).float(t);
         });
     }
 
@@ -114,57 +91,51 @@ impl VmcEncoder {
         }
         (finite::vec3(p), finite::quat(q))
     }
+}
 
-    fn push(&mut self, addr: &str, name: &str, values: &[f32; 7]) {
-        let mut args = Vec::with_capacity(8);
-        args.push(OscType::String(name.to_string()));
-        args.extend(values.iter().map(|&v| OscType::Float(v)));
-        self.push_message(OscMessage {
-            addr: addr.to_string(),
-            args,
+/// One frame's bundles being written into a pool.
+struct Bundles<'a> {
+    pool: &'a mut PacketPool,
+    timetag: OscTime,
+    split: bool,
+}
+
+impl Bundles<'_> {
+    /// A `s name, f × 7` message.
+    fn pose(&mut self, addr: &str, name: &str, values: &[f32; 7]) {
+        let len = string_len(&[addr]) + string_len(&[POSE_TAGS]) + string_len(&[name]) + 28;
+        self.element(len, |w| {
+            w.string(&[addr])
+                .string(&[POSE_TAGS])
+                .string(&[name])
+                .floats(values);
         });
     }
 
-    fn push_message(&mut self, message: OscMessage) {
-        let len = message_len(&message);
-        self.messages.push((OscPacket::Message(message), len));
-    }
-}
-
-/// Encoded size of a message: padded address, padded type tags, arguments.
-fn message_len(m: &OscMessage) -> usize {
-    let padded = |n: usize| (n + 4) & !3;
-    let mut len = padded(m.addr.len()) + padded(1 + m.args.len());
-    for a in &m.args {
-        len += match a {
-            OscType::String(s) => padded(s.len()),
-            OscType::Int(_) | OscType::Float(_) => 4,
-            // Only the above are produced here; the rest are sized by actually encoding.
-            other => rosc::encoder::encode(&OscPacket::Message(OscMessage {
-                addr: "/".into(),
-                args: vec![other.clone()],
-            }))
-            .map(|b| b.len() - 8)
-            .unwrap_or(0),
+    /// A message of `len` encoded bytes, appended to the last bundle or, when splitting and it
+    /// would overflow that one, to a new bundle.
+    fn element(&mut self, len: usize, write: impl FnOnce(&mut OscWriter)) {
+        // Greedy packing keeps message order, so Root stays first and OK/T stay last, which
+        // receivers that apply on /VMC/Ext/OK rely on. A bundle always takes one message, even
+        // one too big for the limit on its own.
+        let start_new = match self.pool.last_packet() {
+            None => true,
+            Some(b) => {
+                self.split
+                    && b.len() > BUNDLE_HEADER_BYTES
+                    && b.len() + ELEMENT_HEADER_BYTES + len > MAX_SPLIT_BUNDLE_BYTES
+            }
         };
+        if start_new {
+            OscWriter::new(self.pool.next_packet()).bundle_header(self.timetag);
+        }
+        if let Some(buf) = self.pool.last_packet() {
+            let mut w = OscWriter::new(buf);
+            let e = w.begin_element();
+            write(&mut w);
+            w.end_element(e);
+        }
     }
-    len
-}
-
-fn write_bundle(
-    out: &mut Vec<Vec<u8>>,
-    used: &mut usize,
-    timetag: OscTime,
-    content: Vec<OscPacket>,
-) {
-    if *used == out.len() {
-        out.push(Vec::new());
-    }
-    let buf = &mut out[*used];
-    buf.clear();
-    // Encoding into a Vec<u8> cannot fail (its error type is Infallible).
-    let _ = rosc::encoder::encode_into(&OscPacket::Bundle(OscBundle { timetag, content }), buf);
-    *used += 1;
 }
 
 #[cfg(test)]
@@ -173,6 +144,7 @@ mod tests {
     use crate::frame::BoneSample;
     use glam::{Quat, Vec3};
     use rosc::decoder::decode_udp;
+    use rosc::{OscBundle, OscMessage, OscPacket, OscType};
     use std::time::{Duration, UNIX_EPOCH};
 
     const BONES: [&str; 20] = [
@@ -279,12 +251,88 @@ mod tests {
         assert!(first > 1);
     }
 
+    /// The frame as the rosc-based encoder this one replaced built it (message by message,
+    /// greedily packed when splitting).
+    fn rosc_frame(frame: &BodyFrame, split: bool) -> Vec<Vec<u8>> {
+        let pose = |name: &str, p: glam::Vec3, q: glam::Quat| {
+            let (p, q) = (finite::vec3(p), finite::quat(q));
+            let mut args = vec![OscType::String(name.into())];
+            args.extend([p.x, p.y, p.z, q.x, q.y, q.z, q.w].map(OscType::Float));
+            args
+        };
+        let mut msgs = vec![OscMessage {
+            addr: ROOT_ADDR.into(),
+            args: pose("root", Vec3::ZERO, Quat::IDENTITY),
+        }];
+        for b in &frame.bones {
+            msgs.push(OscMessage {
+                addr: BONE_ADDR.into(),
+                args: pose(b.bone, b.local_position, b.local_rotation),
+            });
+        }
+        msgs.push(OscMessage {
+            addr: OK_ADDR.into(),
+            args: vec![OscType::Int(1)],
+        });
+        msgs.push(OscMessage {
+            addr: TIME_ADDR.into(),
+            args: vec![OscType::Float(finite::scalar64(frame.audio_time_s))],
+        });
+        let timetag = osc_time(frame.timetag);
+        let encode = |content: Vec<OscPacket>| {
+            rosc::encoder::encode(&OscPacket::Bundle(OscBundle { timetag, content })).unwrap()
+        };
+        if !split {
+            return vec![encode(msgs.into_iter().map(OscPacket::Message).collect())];
+        }
+        let mut out = Vec::new();
+        let mut content = Vec::new();
+        let mut size = 16;
+        for m in msgs {
+            let len = 4 + rosc::encoder::encode(&OscPacket::Message(m.clone()))
+                .unwrap()
+                .len();
+            if !content.is_empty() && size + len > MAX_SPLIT_BUNDLE_BYTES {
+                out.push(encode(std::mem::take(&mut content)));
+                size = 16;
+            }
+            content.push(OscPacket::Message(m));
+            size += len;
+        }
+        out.push(encode(content));
+        out
+    }
+
     #[test]
     fn computed_message_sizes_match_rosc() {
-        let mut enc = VmcEncoder::default();
-        enc.collect_messages(&frame(20));
-        for (m, len) in &enc.messages {
-            assert_eq!(rosc::encoder::encode(m).unwrap().len(), *len);
+        // Byte for byte what the rosc-based encoder sent, whole and split, NaNs included, and
+        // so the same split points.
+        let mut f = frame(55);
+        f.bones[3].local_rotation.x = f32::NAN;
+        f.bones[4].local_position.y = f32::INFINITY;
+        for n in [0, 1, 20, 55] {
+            let mut f = f.clone();
+            f.bones.truncate(n);
+            for split in [false, true] {
+                let got = VmcEncoder::new(split).encode_frame(&f);
+                assert_eq!(got, rosc_frame(&f, split), "{n} bones, split {split}");
+            }
         }
+        let mut enc = VmcEncoder::new(true);
+        let mut pool = PacketPool::new();
+        enc.write_frame(&f, &mut pool);
+        assert_eq!(pool.packets(), &rosc_frame(&f, true)[..]);
+        assert_eq!(enc.replaced_non_finite(), 2);
+    }
+
+    #[test]
+    fn a_message_too_big_for_a_split_bundle_gets_one_of_its_own() {
+        let mut f = frame(3);
+        let long: &'static str = Box::leak("x".repeat(1500).into_boxed_str());
+        f.bones[1].bone = long;
+        let packets = VmcEncoder::new(true).encode_frame(&f);
+        assert_eq!(packets, rosc_frame(&f, true));
+        assert_eq!(packets.len(), 3);
+        assert!(packets[1].len() > MAX_SPLIT_BUNDLE_BYTES);
     }
 }

@@ -1,50 +1,174 @@
 //! VRChat OSC trackers (<https://docs.vrchat.com/docs/osc-trackers>): up to eight body trackers
 //! plus the head, each a world position and Unity Euler angles.
 
+use crate::error::{ProtocolError, TrackerMapError};
 use crate::finite;
 use crate::frame::{BodyFrame, BoneSample};
+use crate::human_bones::canonical_bone;
+use crate::osc_writer::OscWriter;
+use crate::packet_pool::PacketPool;
 use glam::{EulerRot, Quat, Vec3};
-use rosc::{OscMessage, OscPacket, OscType};
 
-/// Which bone feeds each VRChat tracker.
+/// VRChat accepts trackers 1..=8.
+pub const MAX_TRACKERS: usize = 8;
+
+/// The key of the head tracker in a numbered map.
+pub const HEAD_KEY: &str = "head";
+
+const DEFAULT_TRACKERS: [&str; MAX_TRACKERS] = [
+    "Hips",
+    "Chest",
+    "LeftFoot",
+    "RightFoot",
+    "LeftLowerLeg",
+    "RightLowerLeg",
+    "LeftLowerArm",
+    "RightLowerArm",
+];
+const DEFAULT_HEAD: &str = "Head";
+
+/// Which bone feeds each VRChat tracker; valid by construction (at most 8 trackers, every bone a
+/// `HumanBodyBones` name, spelled as Unity spells it).
 #[derive(Clone, Debug, PartialEq, Eq, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(try_from = "RawTrackerMap")]
 pub struct VrchatTrackerMap {
-    /// Bone names (`HumanBodyBones`) for trackers 1..=8, in order; fewer than 8 leaves the rest
-    /// unsent.
-    pub trackers: Vec<String>,
-    /// Bone for `/tracking/trackers/head`, or none to leave VRChat's own head alone.
-    pub head: Option<String>,
+    trackers: Vec<&'static str>,
+    head: Option<&'static str>,
 }
 
-impl Default for VrchatTrackerMap {
+/// The map as written in TOML, before validation.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct RawTrackerMap {
+    trackers: Vec<String>,
+    head: Option<String>,
+}
+
+impl Default for RawTrackerMap {
     fn default() -> Self {
-        let trackers = [
-            "Hips",
-            "Chest",
-            "LeftFoot",
-            "RightFoot",
-            "LeftLowerLeg",
-            "RightLowerLeg",
-            "LeftLowerArm",
-            "RightLowerArm",
-        ];
         Self {
-            trackers: trackers.iter().map(|s| s.to_string()).collect(),
-            head: Some("Head".to_string()),
+            trackers: DEFAULT_TRACKERS.iter().map(|s| s.to_string()).collect(),
+            head: Some(DEFAULT_HEAD.to_string()),
         }
     }
 }
 
-/// VRChat accepts trackers 1..=8.
-pub const MAX_TRACKERS: usize = 8;
+impl TryFrom<RawTrackerMap> for VrchatTrackerMap {
+    type Error = ProtocolError;
+
+    fn try_from(raw: RawTrackerMap) -> Result<Self, ProtocolError> {
+        Self::new(&raw.trackers, raw.head.as_deref())
+    }
+}
+
+impl Default for VrchatTrackerMap {
+    fn default() -> Self {
+        Self {
+            trackers: DEFAULT_TRACKERS.to_vec(),
+            head: Some(DEFAULT_HEAD),
+        }
+    }
+}
+
+impl VrchatTrackerMap {
+    /// Bones for trackers 1, 2, ... in order (fewer than 8 leaves the rest unsent) and for the
+    /// head (`None` leaves VRChat's own head alone); an error for more than 8 trackers or a name
+    /// that is not a `HumanBodyBones` bone (case is forgiven and corrected).
+    pub fn new<S: AsRef<str>>(trackers: &[S], head: Option<&str>) -> Result<Self, ProtocolError> {
+        if trackers.len() > MAX_TRACKERS {
+            return Err(TrackerMapError::TooMany(trackers.len()).into());
+        }
+        let trackers = trackers
+            .iter()
+            .enumerate()
+            .map(|(i, bone)| bone_for(&(i + 1).to_string(), bone.as_ref()))
+            .collect::<Result<_, _>>()?;
+        let head = head.map(|bone| bone_for(HEAD_KEY, bone)).transpose()?;
+        Ok(Self { trackers, head })
+    }
+
+    /// The map from numbered entries as `[output.vrchat.trackers]` writes them: keys "1" to "8"
+    /// numbered densely from 1 and "head" (the head stays on `Head` when not given).
+    ///
+    /// Errors name the entry at fault: a key that is not a number or "head", a leading zero
+    /// ("01"), a number outside 1..8, a key given twice, a gap (1, 2, 4), an unknown bone.
+    pub fn from_numbered<K, V>(
+        entries: impl IntoIterator<Item = (K, V)>,
+    ) -> Result<Self, ProtocolError>
+    where
+        K: AsRef<str>,
+        V: AsRef<str>,
+    {
+        let mut numbered: [Option<&'static str>; MAX_TRACKERS] = [None; MAX_TRACKERS];
+        let mut head = None;
+        for (key, bone) in entries {
+            let (key, bone) = (key.as_ref(), bone.as_ref());
+            let slot = if key == HEAD_KEY {
+                &mut head
+            } else {
+                &mut numbered[tracker_index(key)?]
+            };
+            if slot.is_some() {
+                return Err(TrackerMapError::Duplicate(key.to_string()).into());
+            }
+            *slot = Some(bone_for(key, bone)?);
+        }
+        let count = numbered.iter().filter(|b| b.is_some()).count();
+        if let Some(missing) = numbered[..count].iter().position(Option::is_none) {
+            let highest = numbered
+                .iter()
+                .rposition(Option::is_some)
+                .map_or(0, |i| i + 1);
+            return Err(TrackerMapError::Gap {
+                missing: missing + 1,
+                highest,
+            }
+            .into());
+        }
+        Ok(Self {
+            trackers: numbered.iter().map_while(|b| *b).collect(),
+            head: Some(head.unwrap_or(DEFAULT_HEAD)),
+        })
+    }
+
+    /// Bones for trackers 1, 2, ..., in order.
+    pub fn trackers(&self) -> &[&'static str] {
+        &self.trackers
+    }
+
+    /// Bone for `/tracking/trackers/head`, if sent.
+    pub fn head(&self) -> Option<&'static str> {
+        self.head
+    }
+}
+
+/// Index 0..8 of a tracker number key "1".."8".
+fn tracker_index(key: &str) -> Result<usize, TrackerMapError> {
+    if key.is_empty() || !key.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(TrackerMapError::BadKey(key.to_string()));
+    }
+    if key.len() > 1 && key.starts_with('0') {
+        return Err(TrackerMapError::LeadingZero(key.to_string()));
+    }
+    match key.parse::<usize>() {
+        Ok(n) if (1..=MAX_TRACKERS).contains(&n) => Ok(n - 1),
+        _ => Err(TrackerMapError::OutOfRange(key.to_string())),
+    }
+}
+
+fn bone_for(key: &str, bone: &str) -> Result<&'static str, TrackerMapError> {
+    canonical_bone(bone).ok_or_else(|| TrackerMapError::UnknownBone {
+        key: key.to_string(),
+        bone: bone.to_string(),
+    })
+}
 
 /// Encodes frames as VRChat tracker messages, one UDP packet per message.
 #[derive(Clone, Debug)]
 pub struct VrchatEncoder {
     map: VrchatTrackerMap,
     // (address of position, address of rotation, bone) per tracker, built once.
-    addresses: Vec<(String, String, String)>,
+    addresses: Vec<(String, String, &'static str)>,
     missing_bones: u64,
     replaced_non_finite: u64,
 }
@@ -56,26 +180,25 @@ impl Default for VrchatEncoder {
 }
 
 impl VrchatEncoder {
-    /// An encoder for the given tracker assignment; trackers beyond the eighth are ignored.
+    /// An encoder for the given tracker assignment.
     pub fn new(map: VrchatTrackerMap) -> Self {
-        let mut addresses: Vec<(String, String, String)> = map
+        let mut addresses: Vec<(String, String, &'static str)> = map
             .trackers
             .iter()
-            .take(MAX_TRACKERS)
             .enumerate()
-            .map(|(i, bone)| {
+            .map(|(i, &bone)| {
                 (
                     format!("/tracking/trackers/{}/position", i + 1),
                     format!("/tracking/trackers/{}/rotation", i + 1),
-                    bone.clone(),
+                    bone,
                 )
             })
             .collect();
-        if let Some(head) = &map.head {
+        if let Some(head) = map.head {
             addresses.push((
                 "/tracking/trackers/head/position".into(),
                 "/tracking/trackers/head/rotation".into(),
-                head.clone(),
+                head,
             ));
         }
         Self {
@@ -103,19 +226,27 @@ impl VrchatEncoder {
 
     /// The frame's packets, freshly allocated.
     pub fn encode_frame(&mut self, frame: &BodyFrame) -> Vec<Vec<u8>> {
-        let mut out = Vec::new();
-        self.encode_frame_into(frame, &mut out);
-        out
+        let mut pool = PacketPool::new();
+        self.write_frame(frame, &mut pool);
+        pool.into_packets()
     }
 
-    /// The frame's packets written into `out`, whose inner buffers are reused.
+    /// The frame's packets written into `out`, whose inner buffers are reused; `out` ends up
+    /// holding exactly this frame's packets (spare buffers are freed: the real-time path uses
+    /// [`Self::write_frame`], which keeps them).
+    pub fn encode_frame_into(&mut self, frame: &BodyFrame, out: &mut Vec<Vec<u8>>) {
+        let mut pool = PacketPool::from(std::mem::take(out));
+        self.write_frame(frame, &mut pool);
+        *out = pool.into_packets();
+    }
+
+    /// The frame's packets, replacing the pool's; allocates only while the pool grows.
     ///
     /// Separate messages rather than a bundle: VRChat applies them on arrival anyway, and some
     /// relays in between (OSC routers) do not forward bundles.
-    pub fn encode_frame_into(&mut self, frame: &BodyFrame, out: &mut Vec<Vec<u8>>) {
-        let mut used = 0;
-        for i in 0..self.addresses.len() {
-            let bone = &self.addresses[i].2;
+    pub fn write_frame(&mut self, frame: &BodyFrame, pool: &mut PacketPool) {
+        pool.clear();
+        for (pos_addr, rot_addr, bone) in &self.addresses {
             let Some(sample) = find_bone(&frame.bones, bone) else {
                 self.missing_bones += 1;
                 continue;
@@ -126,11 +257,9 @@ impl VrchatEncoder {
             }
             let p = finite::vec3(p);
             let e = unity_euler_degrees(q);
-            let (pos_addr, rot_addr, _) = &self.addresses[i];
-            write_message(out, &mut used, pos_addr, [p.x, p.y, p.z]);
-            write_message(out, &mut used, rot_addr, [e.x, e.y, e.z]);
+            write_message(pool.next_packet(), pos_addr, [p.x, p.y, p.z]);
+            write_message(pool.next_packet(), rot_addr, [e.x, e.y, e.z]);
         }
-        out.truncate(used);
     }
 }
 
@@ -138,19 +267,11 @@ fn find_bone<'a>(bones: &'a [BoneSample], name: &str) -> Option<&'a BoneSample> 
     bones.iter().find(|b| b.bone == name)
 }
 
-fn write_message(out: &mut Vec<Vec<u8>>, used: &mut usize, addr: &str, v: [f32; 3]) {
-    if *used == out.len() {
-        out.push(Vec::new());
-    }
-    let buf = &mut out[*used];
-    buf.clear();
-    let packet = OscPacket::Message(OscMessage {
-        addr: addr.to_string(),
-        args: v.iter().map(|&x| OscType::Float(x)).collect(),
-    });
-    // Encoding into a Vec<u8> cannot fail (its error type is Infallible).
-    let _ = rosc::encoder::encode_into(&packet, buf);
-    *used += 1;
+fn write_message(buf: &mut Vec<u8>, addr: &str, v: [f32; 3]) {
+    OscWriter::new(buf)
+        .string(&[addr])
+        .string(&[",fff"])
+        .floats(&v);
 }
 
 /// Unity's Euler angles of a rotation in degrees (x, y, z), each in (-180, 180]: the rotation is
@@ -174,6 +295,7 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
     use rosc::decoder::decode_udp;
+    use rosc::{OscMessage, OscPacket, OscType};
     use std::time::UNIX_EPOCH;
 
     fn close(a: Vec3, b: Vec3, tol: f32) -> bool {
@@ -307,10 +429,160 @@ mod tests {
     fn tracker_map_deserialises_from_toml() {
         let m: VrchatTrackerMap =
             toml::from_str("trackers = [\"Hips\", \"Head\"]\nhead = \"Neck\"").unwrap();
-        assert_eq!(m.trackers, vec!["Hips", "Head"]);
-        assert_eq!(m.head.as_deref(), Some("Neck"));
+        assert_eq!(m.trackers(), ["Hips", "Head"]);
+        assert_eq!(m.head(), Some("Neck"));
         let d: VrchatTrackerMap = toml::from_str("").unwrap();
         assert_eq!(d, VrchatTrackerMap::default());
         assert!(toml::from_str::<VrchatTrackerMap>("trackerz = []").is_err());
+    }
+
+    #[test]
+    fn numbered_maps_read_as_the_config_writes_them() {
+        let m = VrchatTrackerMap::from_numbered([("2", "chest"), ("1", "Hips"), ("head", "Neck")])
+            .unwrap();
+        assert_eq!(
+            m.trackers(),
+            ["Hips", "Chest"],
+            "in number order, spelled as Unity does"
+        );
+        assert_eq!(m.head(), Some("Neck"));
+        let default: Vec<(String, String)> = VrchatTrackerMap::default()
+            .trackers()
+            .iter()
+            .enumerate()
+            .map(|(i, b)| ((i + 1).to_string(), b.to_string()))
+            .collect();
+        assert_eq!(
+            VrchatTrackerMap::from_numbered(default).unwrap(),
+            VrchatTrackerMap::default(),
+            "the head stays on Head when not given"
+        );
+        let empty = VrchatTrackerMap::from_numbered(std::iter::empty::<(&str, &str)>()).unwrap();
+        assert!(empty.trackers().is_empty());
+    }
+
+    #[test]
+    fn bad_numbered_maps_are_errors_that_name_the_entry() {
+        let err = |entries: &[(&str, &str)]| match VrchatTrackerMap::from_numbered(
+            entries.iter().copied(),
+        ) {
+            Err(ProtocolError::TrackerMap(e)) => e,
+            other => panic!("{entries:?}: {other:?}"),
+        };
+        use TrackerMapError::*;
+        assert_eq!(err(&[("0", "Hips")]), OutOfRange("0".into()));
+        assert_eq!(err(&[("9", "Hips")]), OutOfRange("9".into()));
+        assert_eq!(
+            err(&[("99999999999999999999999", "Hips")]),
+            OutOfRange("99999999999999999999999".into())
+        );
+        assert_eq!(
+            err(&[("1", "Hips"), ("2", "Chest"), ("4", "Head")]),
+            Gap {
+                missing: 3,
+                highest: 4
+            }
+        );
+        assert_eq!(
+            err(&[("2", "Chest")]),
+            Gap {
+                missing: 1,
+                highest: 2
+            }
+        );
+        assert_eq!(err(&[("1", "Hips"), ("1", "Chest")]), Duplicate("1".into()));
+        assert_eq!(
+            err(&[("head", "Head"), ("head", "Neck")]),
+            Duplicate("head".into())
+        );
+        assert_eq!(err(&[("01", "Hips")]), LeadingZero("01".into()));
+        for key in ["one", "", " 1", "-1", "Head", "1.0", "+1"] {
+            assert_eq!(err(&[(key, "Hips")]), BadKey(key.into()), "{key:?}");
+        }
+        assert_eq!(
+            err(&[("1", "Hips"), ("2", "Tail")]),
+            UnknownBone {
+                key: "2".into(),
+                bone: "Tail".into()
+            }
+        );
+        assert_eq!(
+            err(&[("head", "")]),
+            UnknownBone {
+                key: "head".into(),
+                bone: "".into()
+            }
+        );
+        let message = VrchatTrackerMap::from_numbered([("1", "Hips"), ("3", "Chest")])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("tracker 2 is missing") && message.contains("tracker 3"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn listed_maps_are_validated_too() {
+        assert!(matches!(
+            VrchatTrackerMap::new(&["Hips"; 9], None),
+            Err(ProtocolError::TrackerMap(TrackerMapError::TooMany(9)))
+        ));
+        assert!(matches!(
+            VrchatTrackerMap::new(&["Hips", "Hipz"], None),
+            Err(ProtocolError::TrackerMap(
+                TrackerMapError::UnknownBone { .. }
+            ))
+        ));
+        let m = VrchatTrackerMap::new(&["hips"], None).unwrap();
+        assert_eq!((m.trackers(), m.head()), (&["Hips"][..], None));
+        let e = toml::from_str::<VrchatTrackerMap>("trackers = [\"Hips\", \"Knee\"]")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("Knee"), "{e}");
+    }
+
+    #[test]
+    fn messages_are_byte_identical_to_the_rosc_encoding() {
+        let bones = vec![
+            sample("Hips", 0.5, Quat::from_rotation_y(0.3)),
+            sample("Head", f32::NAN, Quat::from_rotation_x(0.2)),
+        ];
+        let frame = BodyFrame {
+            frame_index: 0,
+            audio_time_s: 0.0,
+            timetag: UNIX_EPOCH,
+            root_position: Vec3::ZERO,
+            root_rotation: Quat::IDENTITY,
+            bones,
+        };
+        let mut enc = VrchatEncoder::default();
+        let got = enc.encode_frame(&frame);
+        let msg = |addr: &str, v: Vec3| {
+            rosc::encoder::encode(&OscPacket::Message(OscMessage {
+                addr: addr.into(),
+                args: vec![
+                    OscType::Float(v.x),
+                    OscType::Float(v.y),
+                    OscType::Float(v.z),
+                ],
+            }))
+            .unwrap()
+        };
+        let want = vec![
+            msg("/tracking/trackers/1/position", Vec3::new(0.5, 1.0, 2.0)),
+            msg(
+                "/tracking/trackers/1/rotation",
+                unity_euler_degrees(Quat::from_rotation_y(0.3)),
+            ),
+            msg("/tracking/trackers/head/position", Vec3::ZERO),
+            msg(
+                "/tracking/trackers/head/rotation",
+                unity_euler_degrees(Quat::from_rotation_x(0.2)),
+            ),
+        ];
+        assert_eq!(got, want);
+        assert_eq!(enc.missing_bones(), 7);
+        assert_eq!(enc.replaced_non_finite(), 1);
     }
 }

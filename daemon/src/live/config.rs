@@ -150,7 +150,7 @@ pub struct VrchatConfig {
     pub enabled: bool,
     /// Where to (host:port).
     pub target: String,
-    /// Tracker number (1–8) → bone name (Unity HumanBodyBones).
+    /// Tracker number (1–8, from 1 without gaps) or "head" → bone name (Unity HumanBodyBones).
     pub trackers: BTreeMap<String, String>,
 }
 
@@ -158,10 +158,10 @@ impl Default for VrchatConfig {
     fn default() -> Self {
         // protocols' default assignment, numbered from 1 as VRChat numbers its trackers.
         let trackers = protocols::VrchatTrackerMap::default()
-            .trackers
-            .into_iter()
+            .trackers()
+            .iter()
             .enumerate()
-            .map(|(i, bone)| ((i + 1).to_string(), bone))
+            .map(|(i, bone)| ((i + 1).to_string(), bone.to_string()))
             .collect();
         Self {
             enabled: false,
@@ -343,14 +343,11 @@ impl Config {
             }
             Some(_) => {}
         }
+        // Numbering, duplicates and HumanBodyBones names are protocols' to judge; whether the
+        // rig has the bone (so it is ever in a frame) is ours.
+        protocols::VrchatTrackerMap::from_numbered(&self.output.vrchat.trackers)
+            .map_err(|e| bad("output.vrchat.trackers", e.to_string()))?;
         for (n, bone) in &self.output.vrchat.trackers {
-            let ok_n = n.parse::<u8>().is_ok_and(|n| (1..=8).contains(&n));
-            if !ok_n {
-                return Err(bad(
-                    "output.vrchat.trackers",
-                    format!("key {n:?}: must be 1..=8"),
-                ));
-            }
             if model::rig::Joint::from_name(bone).is_none() {
                 return Err(bad(
                     "output.vrchat.trackers",
@@ -396,6 +393,20 @@ mod tests {
         let e =
             Config::parse("[dancer]\ntemperature = \"hot\"\n", Path::new("x.toml")).unwrap_err();
         assert!(e.to_string().contains("temperature"), "{e}");
+    }
+
+    #[test]
+    fn vrchat_tracker_gaps_are_errors() {
+        let toml = "[output.vrchat.trackers]\n1 = \"Hips\"\n3 = \"Chest\"\n";
+        let e = Config::parse(toml, Path::new("x.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("output.vrchat.trackers") && e.contains("tracker 2 is missing"),
+            "{e}"
+        );
+        let toml = "[output.vrchat.trackers]\n1 = \"Hips\"\nhead = \"Neck\"\n";
+        assert!(Config::parse(toml, Path::new("x.toml")).is_ok());
     }
 
     #[test]

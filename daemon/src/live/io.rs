@@ -49,18 +49,8 @@ impl OscSink {
 
     /// An output to `targets` with `config`'s encoder settings.
     pub fn new(targets: Vec<OscTarget>, config: &Config) -> Result<Self> {
-        // Trackers "1".."8" in order; a gap ends the list (VRChat numbers them densely).
-        let mut trackers = Vec::new();
-        for n in 1..=8 {
-            match config.output.vrchat.trackers.get(&n.to_string()) {
-                Some(bone) => trackers.push(bone.clone()),
-                None => break,
-            }
-        }
-        let map = VrchatTrackerMap {
-            trackers,
-            ..VrchatTrackerMap::default()
-        };
+        let map = VrchatTrackerMap::from_numbered(&config.output.vrchat.trackers)
+            .context("output.vrchat.trackers")?;
         let out = OscOutput::with_encoders(
             targets,
             NativeEncoder::default(),
