@@ -9,12 +9,12 @@ use anyhow::{Context, Result, bail};
 
 use crate::live::capture::{self, CaptureSettings};
 use crate::live::config::Config;
+use crate::live::control_queue::ControlHub;
 use crate::live::io::{ControlInputs, OscSink};
 use crate::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
 use crate::live::replay::{self, ReplayAudio, ReplaySettings};
 use crate::live::stats::StatsReport;
 use crate::live::status::StatusPrinter;
-use crate::live::control_queue::ControlHub;
 
 /// Where the audio comes from.
 #[derive(Clone, Debug, PartialEq)]

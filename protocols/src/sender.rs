@@ -182,6 +182,52 @@ impl OscOutput {
         self.sent.last_error
     }
 
+    /// Encodes `frame`, and one analysis event of each kind, in every layout this output
+    /// sends, without sending anything: the buffers grow to their working size here, at
+    /// set-up, so the first real frame on the real-time thread does not allocate either.
+    pub fn prepare(&mut self, frame: &BodyFrame) {
+        for kind in [TargetKind::Native, TargetKind::Vmc, TargetKind::Vrchat] {
+            if !self.targets.iter().any(|t| t.kind == kind) {
+                continue;
+            }
+            self.pool.clear();
+            match kind {
+                TargetKind::Native => self.native.write_frame(frame, self.pool.next_packet()),
+                TargetKind::Vmc => self.vmc.write_frame(frame, &mut self.pool),
+                TargetKind::Vrchat => self.vrchat.write_frame(frame, &mut self.pool),
+            }
+        }
+        let events = [
+            AnalysisEvent::Beat {
+                time_s: 0.0,
+                index_in_bar: 1,
+                beats_per_bar: 4,
+                tempo_bpm: 120.0,
+            },
+            AnalysisEvent::Onset {
+                time_s: 0.0,
+                strength: 0.0,
+            },
+            AnalysisEvent::Tempo {
+                bpm: 120.0,
+                confidence: 0.0,
+            },
+            AnalysisEvent::Chroma {
+                time_s: 0.0,
+                chroma: [0.0; 12],
+            },
+            AnalysisEvent::Energy {
+                time_s: 0.0,
+                db: -120.0,
+            },
+        ];
+        for e in &events {
+            self.pool.clear();
+            self.native.write_event(e, self.pool.next_packet());
+        }
+        self.pool.clear();
+    }
+
     /// Sends the frame to every target; each layout is encoded at most once per frame.
     pub fn send_frame(&mut self, frame: &BodyFrame) {
         for kind in [TargetKind::Native, TargetKind::Vmc, TargetKind::Vrchat] {

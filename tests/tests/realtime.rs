@@ -18,8 +18,11 @@ use rosc::{OscMessage, OscPacket, OscType};
 #[global_allocator]
 static ALLOCATOR: alloc_counter::CountingAllocator = alloc_counter::CountingAllocator;
 
-/// Wall seconds of each run (the issue asks for at least 20).
-const RUN_S: f64 = 21.0;
+/// Audio seconds of each run; the counted part (from the pipeline's start, after the
+/// dancer has loaded) must last at least [`COUNTED_S`].
+const RUN_S: f64 = 23.0;
+/// Wall seconds the counted loops must have run.
+const COUNTED_S: f64 = 20.0;
 
 /// A UDP receiver counting datagrams on a thread of its own.
 struct Receiver {
@@ -81,21 +84,24 @@ fn controller(port: u16, stop: Arc<AtomicBool>) -> JoinHandle<u64> {
             send("temperature", vec![OscType::Float(0.2 + x)]);
             send("accent", vec![OscType::Float(0.5 * x)]);
             sent += 2;
-            if i % 25 == 0 {
+            if i.is_multiple_of(25) {
                 let pose = format!("pose-{}", 1 + (i / 25) % 16);
                 let when = ["beat", "bar", "now"][(i / 25 % 3) as usize];
-                send("keypose", vec![OscType::String(pose), OscType::String(when.into())]);
+                send(
+                    "keypose",
+                    vec![OscType::String(pose), OscType::String(when.into())],
+                );
                 send("transition", vec![OscType::Float(1.0 + x)]);
                 sent += 2;
             }
-            if i % 37 == 0 {
+            if i.is_multiple_of(37) {
                 send("seed", vec![OscType::Int(i as i32)]);
                 send("tempo", vec![OscType::Float(120.0)]);
                 send("keypose", vec![OscType::String("no-such-pose".into())]);
                 let _ = socket.send_to(b"not osc", to);
                 sent += 4;
             }
-            if i % 150 == 0 {
+            if i.is_multiple_of(150) {
                 send("pause", vec![]);
                 send("resume", vec![]);
                 send("keypose/clear", vec![]);
@@ -168,7 +174,7 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
         assert_eq!(a - b, 2, "one allocation and its free, counted once each");
     }
 
-    // Then: two live runs at once, the neural and the retrieval dancer, 21 s each.
+    // Then: two live runs at once, the neural and the retrieval dancer, over 20 s each.
     let runs = [live_run("neural"), live_run("retrieval")].map(|h| h.join().unwrap());
     let counted = ThreadAllocations::now();
     let during = ThreadAllocations {
@@ -181,23 +187,57 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
         let r = &run.report;
         // The report carries the same per-thread counts (process-wide, so they include the
         // deliberate allocations above).
-        assert_eq!(r.allocations.total() - after.total(), 0, "{:?}", r.allocations);
+        assert_eq!(
+            r.allocations.total() - after.total(),
+            0,
+            "{:?}",
+            r.allocations
+        );
         assert!(r.allocation_counting);
-        assert!(r.frames_sent as f64 > 55.0 * RUN_S, "{} frames", r.frames_sent);
-        assert!(r.model_frames as f64 > 20.0 * RUN_S, "{} steps", r.model_frames);
+        assert!(
+            r.wall_s >= COUNTED_S && r.frames_sent as f64 > 55.0 * (r.wall_s - 1.0),
+            "{} frames in {:.1} s",
+            r.frames_sent,
+            r.wall_s
+        );
+        assert!(
+            r.model_frames as f64 > 20.0 * (r.wall_s - 1.0),
+            "{} steps",
+            r.model_frames
+        );
         // Every output got datagrams: native bundles and events, VMC split into several
         // bundles a frame, VRChat one message per tracker and value.
         assert!(run.received[0] > r.frames_sent, "native {:?}", run.received);
-        assert!(run.received[1] > 2 * r.frames_sent, "vmc {:?}", run.received);
-        assert!(run.received[2] > 10 * r.frames_sent, "vrchat {:?}", run.received);
+        assert!(
+            run.received[1] >= 2 * r.frames_sent,
+            "vmc {:?}",
+            run.received
+        );
+        assert!(
+            run.received[2] > 10 * r.frames_sent,
+            "vrchat {:?}",
+            run.received
+        );
         // The control traffic went through the real path.
         assert!(r.osc_control_accepted > run.control_sent / 2, "{r:?}");
-        assert!(r.controls_accepted > 100 && r.controls_rejected > 0, "{r:?}");
+        assert!(
+            r.controls_accepted > 100 && r.controls_rejected > 0,
+            "{r:?}"
+        );
         assert_eq!(
-            (r.drops, r.features_dropped, r.anchors_dropped, r.poses_dropped),
+            (
+                r.drops,
+                r.features_dropped,
+                r.anchors_dropped,
+                r.poses_dropped
+            ),
             (0, 0, 0, 0),
             "{r:?}"
         );
     }
-    assert_eq!(during, ThreadAllocations::default(), "allocations during the runs");
+    assert_eq!(
+        during,
+        ThreadAllocations::default(),
+        "allocations during the runs"
+    );
 }

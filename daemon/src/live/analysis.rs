@@ -333,7 +333,10 @@ mod tests {
             process_silence(&mut an, &silence, 48_000, usize::from(channels), &mut out);
             // One second of audio: 25 model frames, less the analysis's own latency.
             let frames = feature_rx.slots();
-            assert!((20..=25).contains(&frames), "{channels} ch: {frames} frames");
+            assert!(
+                (20..=25).contains(&frames),
+                "{channels} ch: {frames} frames"
+            );
             while feature_rx.pop().is_ok() {}
         }
     }

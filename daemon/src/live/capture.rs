@@ -338,7 +338,9 @@ pub fn spawn(
                 let stalled = stream.is_some() && silent_ns > stall_ns;
                 if stalled {
                     ctx.stats.capture_stalls.fetch_add(1, Ordering::Relaxed);
-                    tracing::warn!("audio input {name:?} stopped delivering; rebuilding the stream");
+                    tracing::warn!(
+                        "audio input {name:?} stopped delivering; rebuilding the stream"
+                    );
                 }
                 if !health.broken.load(Ordering::Relaxed) && stream.is_some() && !stalled {
                     continue;
@@ -415,7 +417,10 @@ mod tests {
             range(2, 48_000, 48_000, SampleFormat::I24),
         ])
         .unwrap();
-        assert_eq!((c.sample_rate(), c.sample_format()), (48_000, SampleFormat::I24));
+        assert_eq!(
+            (c.sample_rate(), c.sample_format()),
+            (48_000, SampleFormat::I24)
+        );
     }
 
     #[test]

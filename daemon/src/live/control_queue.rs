@@ -230,7 +230,9 @@ impl ControlSender {
 
     fn offer(&self, slot: &ParamSlot, bits: u64) {
         if slot.offer(bits) {
-            self.stats.controls_coalesced.fetch_add(1, Ordering::Relaxed);
+            self.stats
+                .controls_coalesced
+                .fetch_add(1, Ordering::Relaxed);
         }
     }
 
@@ -416,7 +418,11 @@ mod tests {
             ControlEvent::TransitionBeats(65.0),
             ControlEvent::TempoHint(20.0),
         ] {
-            assert_eq!(tx.send(bad.clone()), Err(ControlRefusal::OutOfRange), "{bad:?}");
+            assert_eq!(
+                tx.send(bad.clone()),
+                Err(ControlRefusal::OutOfRange),
+                "{bad:?}"
+            );
         }
         assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 6);
     }

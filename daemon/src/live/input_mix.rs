@@ -4,7 +4,7 @@
 //! preallocated chunks, into the audio ring. Every callback size and channel count is handled
 //! without allocating and without panicking; what cannot be read is counted.
 
-use cpal::{FromSample, Sample, SampleFormat, I24, U24};
+use cpal::{FromSample, I24, Sample, SampleFormat, U24};
 use thiserror::Error;
 
 use super::ring::RingWriter;
@@ -244,7 +244,11 @@ mod tests {
         assert_eq!(mix.write_samples(&data, 44_100, &mut w), 10);
         let (_, samples) = drain(&mut r);
         // Channels 3, 5, 7 hold 2000, 4000, 6000 → mean 4000 / 32768.
-        assert!((samples[0] - 4000.0 / 32768.0).abs() < 1e-5, "{}", samples[0]);
+        assert!(
+            (samples[0] - 4000.0 / 32768.0).abs() < 1e-5,
+            "{}",
+            samples[0]
+        );
     }
 
     #[test]
@@ -262,7 +266,10 @@ mod tests {
         check(mix.write_samples(&[i64::MAX / 2, 0], 48_000, &mut w), 0.5);
         check(mix.write_samples(&[192u8, 128], 48_000, &mut w), 0.5);
         check(mix.write_samples(&[49_152u16, 32_768], 48_000, &mut w), 0.5);
-        check(mix.write_samples(&[u32::MAX / 4 * 3, 0], 48_000, &mut w), 0.5);
+        check(
+            mix.write_samples(&[u32::MAX / 4 * 3, 0], 48_000, &mut w),
+            0.5,
+        );
         check(mix.write_samples(&[u64::MAX / 4, 0], 48_000, &mut w), -0.5);
         let i24 = I24::new(1 << 22).unwrap();
         check(mix.write_samples(&[i24, i24], 48_000, &mut w), 0.5);

@@ -11,8 +11,8 @@ use anyhow::{Context, Result};
 use glam::Quat;
 use model::rig::JOINT_COUNT;
 use protocols::{
-    ControlParser, ControlReceiver, MidiInputs, MidiMap, MidiParser, NativeEncoder,
-    OscOutput, OscTarget, TargetKind, VmcEncoder, VrchatEncoder, VrchatTrackerMap, parse_target,
+    ControlParser, ControlReceiver, MidiInputs, MidiMap, MidiParser, NativeEncoder, OscOutput,
+    OscTarget, TargetKind, VmcEncoder, VrchatEncoder, VrchatTrackerMap, parse_target,
 };
 
 use super::config::Config;
@@ -87,10 +87,15 @@ impl FrameSink for OscSink {
     fn packets_sent(&self) -> u64 {
         self.out.packets_sent()
     }
+    fn prepare(&mut self, frame: &BodyFrame) {
+        self.out.prepare(frame);
+    }
     fn losses(&self) -> SinkLosses {
+        let c = self.out.counters();
         SinkLosses {
-            send_errors: self.out.send_errors(),
-            ..SinkLosses::default()
+            send_errors: c.send_errors,
+            non_finite_replaced: c.non_finite_replaced + c.clamped_values,
+            vrchat_missing_bones: c.vrchat_missing_bones,
         }
     }
 }

@@ -149,6 +149,7 @@ pub fn run(
     let mut index = 0u64;
     let mut last_t = f64::NEG_INFINITY;
     let mut last_sent: Option<Instant> = None;
+    sink.prepare(builder.build(0, 0.0, &pose));
     let mut deadline = Instant::now() + period;
     let _counting = CountGuard::new(RtThread::Sender);
     while !stop.load(Ordering::Relaxed) {
@@ -193,7 +194,9 @@ pub fn run(
                 .record_s(sent.saturating_duration_since(deadline).as_secs_f64());
             if let Some(prev) = last_sent {
                 let spacing = sent.duration_since(prev).as_secs_f64();
-                stats.jitter.record_s((spacing - period.as_secs_f64()).abs());
+                stats
+                    .jitter
+                    .record_s((spacing - period.as_secs_f64()).abs());
             }
             last_sent = Some(sent);
         }

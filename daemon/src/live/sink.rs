@@ -16,6 +16,9 @@ pub trait FrameSink: Send {
     fn send_event(&mut self, event: &AnalysisEvent);
     /// Packets put on the wire so far.
     fn packets_sent(&self) -> u64;
+    /// Grows the sink's buffers to their working size with a representative frame, sending
+    /// nothing (called at set-up, so the real-time loop never allocates).
+    fn prepare(&mut self, _frame: &BodyFrame) {}
     /// What the sink lost or repaired so far (all zero for sinks that cannot lose anything).
     fn losses(&self) -> SinkLosses {
         SinkLosses::default()
@@ -27,7 +30,7 @@ pub trait FrameSink: Send {
 pub struct SinkLosses {
     /// Datagrams the operating system refused.
     pub send_errors: u64,
-    /// Non-finite values replaced before sending.
+    /// Non-finite values replaced (and out-of-range integers clamped) before sending.
     pub non_finite_replaced: u64,
     /// VRChat trackers skipped because their bone was missing from the frame.
     pub vrchat_missing_bones: u64,
