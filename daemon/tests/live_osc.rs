@@ -74,6 +74,8 @@ struct Frame {
     arrived: Instant,
     tag: OscTime,
     audio_time: f32,
+    /// The root's world position (Unity coordinates, metres).
+    root: [f32; 3],
     /// Local rotations, our coordinates.
     pose: Pose,
 }
@@ -92,8 +94,14 @@ fn native_frames(packets: &[(Instant, Vec<u8>)]) -> (Vec<Frame>, Vec<OscMessage>
                     arrived: *arrived,
                     tag: tag.expect("frames come in bundles"),
                     audio_time: floats(&m)[0],
+                    root: [0.0; 3],
                     pose: Pose::rest(),
                 });
+            } else if m.addr == "/danced/root" {
+                let f = floats(&m);
+                if let Some(fr) = frame.as_mut() {
+                    fr.root = [f[0], f[1], f[2]];
+                }
             } else if let Some(bone) = m.addr.strip_prefix("/danced/joint/") {
                 let f = floats(&m);
                 let joint = Joint::from_name(bone).expect("bones have rig names");
@@ -358,6 +366,55 @@ fn difference(a: &[(f32, Pose)], b: &[(f32, Pose)]) -> f64 {
     }
     assert!(n > 1000, "{n} joint samples matched");
     sum / n as f64
+}
+
+#[test]
+fn a_seed_change_glides_from_where_the_dancer_stands() {
+    // Each seed used to restart the dancer from its seed clip: the root jumped up to 0.48 m
+    // between two 60 Hz frames. Now the randomness restarts and the dance goes on.
+    let dir = scratch("live-seed");
+    let (wav, _) = click_wav(&dir, 7.0);
+    let native = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let port = native.local_addr().unwrap().port();
+    let control_port = free_port();
+    let child = danced()
+        .args(["run", "--input"])
+        .arg(&wav)
+        .args(["--duration", "7", "--temperature", "1"])
+        .args(["--osc", &format!("127.0.0.1:{port}")])
+        .args(["--vmc", &format!("127.0.0.1:{}", free_port())])
+        .args(["--control-port", &control_port.to_string()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    let rx = receive(native, start + Duration::from_secs(8));
+    let control = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let mut seeds = 0;
+    while start.elapsed() < Duration::from_secs(6) {
+        std::thread::sleep(Duration::from_millis(250));
+        if start.elapsed() > Duration::from_secs(1) {
+            seeds += 1;
+            let seed = OscType::Int(1000 + seeds);
+            send(&control, control_port, "/danced/control/seed", vec![seed]);
+        }
+    }
+    let out = wait(child, Duration::from_secs(30));
+    assert!(out.status.success());
+    let (frames, _) = native_frames(&rx.join().unwrap());
+    assert!(frames.len() > 300, "{} frames", frames.len());
+    let step = |a: &Frame, b: &Frame| {
+        let d: f32 = (0..3).map(|i| (b.root[i] - a.root[i]).powi(2)).sum();
+        d.sqrt()
+    };
+    let largest = frames
+        .windows(2)
+        .map(|w| step(&w[0], &w[1]))
+        .fold(0.0f32, f32::max);
+    eprintln!("{seeds} seed changes; largest root step between 60 Hz frames {largest:.3} m");
+    assert!(seeds >= 15);
+    assert!(largest <= 0.1, "the root jumped {largest:.3} m");
 }
 
 #[test]

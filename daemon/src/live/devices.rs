@@ -3,8 +3,10 @@
 use cpal::traits::HostTrait;
 
 use super::capture::{choose_config, device_name};
+use super::input_mix::InputMix;
 
-/// One line per audio input ("name — default format"), or a single "no audio inputs" line.
+/// One line per audio input ("name — the format `run` opens"), or a single "no audio inputs"
+/// line.
 pub fn list_inputs() -> Vec<String> {
     let host = cpal::default_host();
     let default = host.default_input_device().map(|d| device_name(&d));
@@ -24,13 +26,22 @@ pub fn list_inputs() -> Vec<String> {
             } else {
                 ""
             };
+            // Exactly what `run` would open, and which inputs it would hear by default.
             let format = match choose_config(d) {
-                Ok(c) => format!(
-                    "{} Hz, {} ch, {:?}",
-                    c.sample_rate(),
-                    c.channels(),
-                    c.sample_format()
-                ),
+                Ok(c) => {
+                    let heard = InputMix::new(c.channels(), None)
+                        .map(|m| {
+                            let ch: Vec<String> = m.heard().map(|c| c.to_string()).collect();
+                            format!("; run hears input {}", ch.join("+"))
+                        })
+                        .unwrap_or_default();
+                    format!(
+                        "{} Hz, {} ch, {:?}{heard}",
+                        c.sample_rate(),
+                        c.channels(),
+                        c.sample_format()
+                    )
+                }
                 Err(e) => format!("unusable: {e}"),
             };
             format!("{name}{mark} — {format}")
