@@ -6,14 +6,10 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, activation};
 
-use crate::neural::config::FlowConfig;
+use crate::neural::config::{COUPLING_SCALE_OFFSET, FlowConfig};
 use crate::neural::layers::{Dense, constant2, param1, param2, store, values};
 use crate::neural::lu;
 use crate::neural::tensors::{NamedTensors, WeightError};
-
-/// Added to the coupling's raw scale before the sigmoid, so a fresh coupling scales by
-/// sigmoid(2) ≈ 0.88 and scales stay in (0, 1): bounded, so training cannot explode them.
-pub const COUPLING_SCALE_OFFSET: f32 = 2.0;
 
 /// ln(2π) / 2, the base density's constant per dimension.
 pub const HALF_LN_2PI: f32 = 0.918_938_5;

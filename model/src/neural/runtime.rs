@@ -4,13 +4,10 @@
 //! [`Runtime::sample`] never allocate, so they can run on a real-time thread, and each costs
 //! O(window · d_model) per layer, not a re-encode of the window.
 
-use crate::neural::config::NetConfig;
-use crate::neural::flow::COUPLING_SCALE_OFFSET;
-use crate::neural::layers::LN_EPS;
+use crate::neural::config::{COUPLING_SCALE_OFFSET, LN_EPS, NetConfig, rope_frequency};
 use crate::neural::lu;
 use crate::neural::tensors::{NamedTensors, WeightError};
 use crate::neural::token::FLAG_AT;
-use crate::neural::transformer::rope_frequency;
 
 struct Dense {
     w: Vec<f32>,
