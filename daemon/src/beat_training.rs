@@ -68,7 +68,7 @@ fn load_song(audio: &Path, beats: &Path) -> Result<BeatSong> {
     let a = analyze_file(audio, options, &mut |_, _| {})
         .with_context(|| format!("analysing {}", audio.display()))?;
     let frames = a.beat_inputs.len() / BEAT_INPUT_DIM;
-    let first = a.first_hop_s.unwrap_or(0.0) + dsp::analyzer::EVENT_TIME_OFFSET_S;
+    let first = a.first_hop_s.unwrap_or(0.0) + dsp::tracker::EVENT_TIME_OFFSET_S;
     let shifted: Vec<f64> = beats.iter().map(|b| b - first).collect();
     Ok(BeatSong {
         targets: BeatSong::targets_from_beats(&shifted, frames, dsp::hop_rate()),
