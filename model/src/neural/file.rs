@@ -78,7 +78,8 @@ pub struct TrainingSummary {
     /// What the model was trained on (data set, split, dances), and under which terms.
     #[serde(default)]
     pub data: String,
-    /// How it was trained: the `danced train` options of the run (and of the runs it resumed).
+    /// How it was trained: the `danced-train dancer` (before, `danced train`) options of the run
+    /// (and of the runs it resumed).
     #[serde(default)]
     pub recipe: String,
 }

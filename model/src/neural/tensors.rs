@@ -191,16 +191,8 @@ pub fn init_net(c: &NetConfig, seed: u64) -> NamedTensors {
     t.insert("norm.music_std", &[M], vec![1.0; M]);
     t.insert(POSE_MIN, &[P], vec![-1e6; P]);
     t.insert(POSE_MAX, &[P], vec![1e6; P]);
-    t.insert(
-        SEED_MOTION,
-        &[c.window, P],
-        vec![0.0; c.window * P],
-    );
-    t.insert(
-        SEED_MUSIC,
-        &[c.window, M],
-        vec![0.0; c.window * M],
-    );
+    t.insert(SEED_MOTION, &[c.window, P], vec![0.0; c.window * P]);
+    t.insert(SEED_MUSIC, &[c.window, M], vec![0.0; c.window * M]);
     let d = c.d_model;
     dense(&mut t, &mut rng, "embed", c.token_dim(), d, false);
     t.insert("embed.none", &[d], vec![0.0; d]);

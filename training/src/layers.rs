@@ -4,8 +4,8 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::neural::config::LN_EPS;
-use crate::neural::tensors::{NamedTensors, WeightError};
+use model::neural::config::LN_EPS;
+use model::neural::tensors::{NamedTensors, WeightError};
 
 /// A trainable parameter from the named tensor `name` of shape `[n]`.
 pub fn param1(

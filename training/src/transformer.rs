@@ -5,10 +5,10 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData, activation};
 
-use crate::neural::config::{NetConfig, rope_frequency};
-use crate::neural::layers::{Dense, LayerNorm, param1, store};
-use crate::neural::tensors::{NamedTensors, WeightError};
-use crate::neural::token::FLAG_AT;
+use crate::layers::{Dense, LayerNorm, param1, store};
+use model::neural::config::{NetConfig, rope_frequency};
+use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::token::FLAG_AT;
 
 /// One pre-norm block: windowed causal self-attention, then a ReLU feed-forward.
 #[derive(Module, Debug)]

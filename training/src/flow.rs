@@ -6,10 +6,10 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, activation};
 
-use crate::neural::config::{COUPLING_SCALE_OFFSET, FlowConfig};
-use crate::neural::layers::{Dense, constant2, param1, param2, store, values};
-use crate::neural::lu;
-use crate::neural::tensors::{NamedTensors, WeightError};
+use crate::layers::{Dense, constant2, param1, param2, store, values};
+use model::neural::config::{COUPLING_SCALE_OFFSET, FlowConfig};
+use model::neural::lu;
+use model::neural::tensors::{NamedTensors, WeightError};
 
 /// ln(2π) / 2, the base density's constant per dimension.
 pub const HALF_LN_2PI: f32 = 0.918_938_5;
@@ -264,9 +264,9 @@ impl Flow {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::neural::cpu_device;
-    use crate::neural::rng::Rng;
-    use crate::neural::tensors::init_flow;
+    use crate::device::cpu_device;
+    use model::neural::rng::Rng;
+    use model::neural::tensors::init_flow;
 
     fn flow(c: &FlowConfig, seed: u64, noise: f32) -> Flow {
         let mut t = NamedTensors::default();
