@@ -3,8 +3,8 @@
 //! This crate wires the `dsp` analysis to files, commands and the live pipeline.
 
 pub mod alloc_counter;
-pub mod beat_training;
 pub mod bench;
+pub mod command;
 pub mod dancer;
 pub mod dataset;
 pub mod decode;
@@ -13,7 +13,6 @@ pub mod eval;
 pub mod key_cue;
 pub mod live;
 pub mod live_cli;
-pub mod neural;
 pub mod offline;
 pub mod output;
 pub mod plot;

@@ -160,69 +160,23 @@ fn generate_dances_to_a_song_and_writes_bvh() {
 }
 
 #[test]
-fn train_writes_a_model_that_generate_and_bench_use() {
-    let Some(data) = shared_data("tang2018") else {
-        return;
-    };
-    let dir = scratch("train");
-    let model = dir.join("tiny.dnn");
-    let (stdout, stderr) = succeed(
-        danced()
-            .args([
-                "train",
-                "--tiny",
-                "--max-steps",
-                "3",
-                "--sequence",
-                "16",
-                "--jobs",
-                "2",
-            ])
-            .arg("--data")
-            .arg(&data)
-            .arg("--out")
-            .arg(&model),
-    );
-    assert!(stdout.contains("trained 3 steps"), "{stdout}");
-    assert!(stderr.contains("seed clip: training dance"), "{stderr}");
-    // The model file drives generate (through the streaming sampler) and the bench.
-    let out = dir.join("gen.bvh");
-    let (stdout, _) = succeed(
-        danced()
-            .arg("generate")
-            .arg("--audio")
-            .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
-            .args(["--seconds", "4", "--keypose", "pose-2@3"])
-            .arg("--model")
-            .arg(&model)
-            .arg("--out")
-            .arg(&out),
-    );
-    assert!(stdout.contains("by the neural dancer"), "{stdout}");
-    assert!(stdout.contains("key pose pose-2 at 3.00 s"), "{stdout}");
-    let bvh = model::bvh::Bvh::read(&out).unwrap();
-    assert_eq!(bvh.frames.len(), 100);
-    assert!(bvh.frames.iter().flatten().all(|v| v.is_finite()));
-    let (stdout, _) = succeed(
-        danced()
-            .args(["bench", "model", "--frames", "50", "--model"])
-            .arg(&model),
-    );
-    assert!(stdout.contains("p99"), "{stdout}");
-    // A model file is for the neural source only.
-    let run = danced()
-        .arg("generate")
-        .arg("--audio")
-        .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
-        .args(["--source", "retrieval", "--model"])
-        .arg(&model)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(!run.status.success());
-    assert!(String::from_utf8_lossy(&run.stderr).contains("neural source"));
-    std::fs::remove_dir_all(&dir).ok();
+fn the_old_train_commands_name_their_new_home() {
+    for (old, new) in [("train", "dancer"), ("train-beats", "beats")] {
+        let out = danced()
+            .args([old, "--minutes", "1", "--seed", "2"])
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "danced {old} succeeded");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains(&format!("danced-train {new} --minutes 1 --seed 2")),
+            "{stderr}"
+        );
+        assert!(
+            stderr.contains(&format!("cargo run --release -p training -- {new}")),
+            "{stderr}"
+        );
+    }
 }
 
 #[test]

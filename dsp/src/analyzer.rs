@@ -4,18 +4,14 @@ use crate::beat::{BeatTracker, BeatTrackerParams};
 use crate::beat_activation::{BEAT_INPUT_DIM, BeatActivation, BeatInput, BeatNetEnsemble};
 use crate::chroma::ChromaFilterbank;
 use crate::feature::{FeatureFrame, FeatureFramer};
+use crate::hop::HopFrame;
 use crate::mel::{MEL_BANDS, MEL_FMAX, MEL_FMIN, MelFilterbank};
 use crate::meter::MeterTracker;
 use crate::onset::{OnsetDetector, OnsetPeakPicker};
 use crate::resample::StreamResampler;
 use crate::stft::Stft;
+use crate::tracker::{EVENT_TIME_OFFSET_S, TrackerOutput};
 use crate::{ANALYSIS_RATE, DspError, HOP, LONG_WINDOW, SHORT_WINDOW, hop_rate};
-
-/// Shift applied to onset and beat times relative to the short window's centre, in seconds.
-///
-/// A log-compressed flux rises as soon as an attack enters the newest part of the window, so the
-/// detection frame's centre lies after the attack; measured on click tracks (see the tests).
-pub const EVENT_TIME_OFFSET_S: f64 = 0.016;
 
 /// Which beat and onset tracker drives the events and phases.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -50,47 +46,6 @@ pub struct AnalyzerConfig {
     pub tracker: BeatTrackerKind,
     /// Tuning of the native beat tracker.
     pub beat_params: BeatTrackerParams,
-}
-
-/// Everything known about one analysis hop (11.6 ms). Slices borrow the analyzer's buffers.
-#[derive(Clone, Copy, Debug)]
-pub struct HopFrame<'a> {
-    /// Hop number from the start of the stream.
-    pub index: u64,
-    /// Audio time described (centre of the short window), in seconds.
-    pub time_s: f64,
-    /// Stream time at which this hop was computed, in seconds.
-    pub decided_at_s: f64,
-    /// Log-mel power spectrum, [`MEL_BANDS`] values in dB.
-    pub mel_db: &'a [f32],
-    /// RMS energy of the short window in dBFS (≥ −120).
-    pub energy_db: f32,
-    /// Onset strength (SuperFlux).
-    pub onset_strength: f32,
-    /// Onset strength in the bass bands.
-    pub bass_onset_strength: f32,
-    /// Inputs of the learned beat activation (zeros with a tracker that does not use it).
-    pub beat_input: &'a [f32; BEAT_INPUT_DIM],
-    /// Learned beat activation in [0, 1] (0 with a tracker that does not use it).
-    pub beat_activation: f32,
-    /// Chroma, index 0 = C.
-    pub chroma: &'a [f32; 12],
-    /// Tempo in BPM (0 while no beat is heard).
-    pub tempo_bpm: f64,
-    /// Confidence of the tempo in [0, 1].
-    pub tempo_confidence: f64,
-    /// Position in the beat in [0, 1).
-    pub beat_phase: f64,
-    /// Predicted time of the next beat, in seconds.
-    pub next_beat_s: f64,
-    /// Position in the bar in [0, 1).
-    pub bar_phase: f64,
-    /// Position of the current beat in its bar (1 = downbeat).
-    pub beat_in_bar: usize,
-    /// Beats per bar (3 or 4).
-    pub beats_per_bar: usize,
-    /// Whether a beat is heard.
-    pub locked: bool,
 }
 
 /// An onset, reported by the causal peak picker.
@@ -129,18 +84,6 @@ pub trait AnalysisSink {
     fn beat(&mut self, _beat: &BeatEvent) {}
     /// A feature frame at the model rate.
     fn feature(&mut self, _frame: &FeatureFrame) {}
-}
-
-/// Onset and beat decisions for one hop, from whichever tracker is selected.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct TrackerOutput {
-    pub(crate) onset: Option<f64>,
-    pub(crate) beat: Option<f64>,
-    pub(crate) tempo_bpm: f64,
-    pub(crate) tempo_confidence: f64,
-    pub(crate) beat_phase: f64,
-    pub(crate) frames_to_next_beat: f64,
-    pub(crate) locked: bool,
 }
 
 /// Native tracker: SuperFlux peak picking and the beat-pointer HMM.

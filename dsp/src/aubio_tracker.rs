@@ -12,7 +12,7 @@
 
 use aubio::{Onset, OnsetMode, Tempo};
 
-use crate::analyzer::{EVENT_TIME_OFFSET_S, TrackerOutput};
+use crate::tracker::{EVENT_TIME_OFFSET_S, TrackerOutput};
 use crate::{ANALYSIS_RATE, DspError, HOP, SHORT_WINDOW};
 
 /// FFT size of both aubio objects: the native short window, so both trackers see 46 ms frames.

@@ -3,7 +3,7 @@
 //! hop, how likely that hop is a beat. It looks at the past only (about 3 s of it), so it runs
 //! live; the beat tracker uses it as a second observation beside the raw onset strength.
 //!
-//! The network is trained with burn by `danced train-beats` on rendered songs with exact beats
+//! The network is trained with burn by `danced-train beats` on rendered songs with exact beats
 //! (`../shared/tools/synth_beats.py`, seeds from 1000 up); its weights ship inside the binary.
 
 use crate::onset::{FLUX_GROUPS, OnsetDetector};

@@ -16,7 +16,7 @@
 //! the frame's stream time; "long window" means 93 ms before. Both add the resampler's delay
 //! (0 at 22 050 Hz input). A frame's `time_s` is the audio time it describes.
 
-use crate::analyzer::HopFrame;
+use crate::hop::HopFrame;
 use crate::mel::MEL_BANDS;
 
 /// Version of the layout below; bump it whenever an index or a unit changes.

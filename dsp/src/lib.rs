@@ -16,15 +16,17 @@ pub mod beat_activation;
 pub mod chroma;
 pub mod error;
 pub mod feature;
+pub mod hop;
 pub mod mel;
 pub mod meter;
 pub mod metrics;
 pub mod onset;
 pub mod resample;
 pub mod stft;
+pub mod tracker;
 
 pub use analyzer::{
-    AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, HopFrame, OnsetEvent,
+    AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, OnsetEvent,
 };
 pub use beat::{BeatTracker, BeatTrackerParams};
 pub use beat_activation::{
@@ -33,6 +35,7 @@ pub use beat_activation::{
 pub use chroma::ChromaFilterbank;
 pub use error::DspError;
 pub use feature::{FeatureFrame, FeatureFramer, FeatureLayout};
+pub use hop::HopFrame;
 pub use mel::MelFilterbank;
 pub use meter::MeterTracker;
 pub use onset::{OnsetDetector, OnsetPeakPicker};

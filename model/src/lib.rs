@@ -4,7 +4,6 @@
 //! Like `dsp`, this crate knows nothing of threads, sockets or audio devices.
 
 pub mod alignment;
-pub mod beat_training;
 pub mod bvh;
 pub mod clip_file;
 pub mod foot_lock;

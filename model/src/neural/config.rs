@@ -1,9 +1,25 @@
-//! Sizes of the network; stored in the model file so a file rebuilds the exact network.
+//! The network's architecture: its sizes, stored in the model file so a file rebuilds the exact
+//! network, and the fixed constants that training and the live runtime must share.
 
 use serde::{Deserialize, Serialize};
 
 use crate::motion::MOTION_FEATURE_DIM;
 use crate::neural::token::TOKEN_DIM;
+
+/// Added to the coupling's raw scale before the sigmoid, so a fresh coupling scales by
+/// sigmoid(2) ≈ 0.88 and scales stay in (0, 1): bounded, so training cannot explode them.
+pub const COUPLING_SCALE_OFFSET: f32 = 2.0;
+
+/// Epsilon of every layer norm (training and the live runtime use the same).
+pub const LN_EPS: f32 = 1e-5;
+
+/// Base of the rotary frequencies.
+pub const ROPE_BASE: f64 = 10_000.0;
+
+/// Rotation frequency of pair `i` of `half` pairs, radians per token.
+pub fn rope_frequency(i: usize, half: usize) -> f64 {
+    ROPE_BASE.powf(-(i as f64) / half as f64)
+}
 
 /// Sizes of the conditional flow.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

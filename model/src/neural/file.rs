@@ -12,7 +12,9 @@ use thiserror::Error;
 
 use crate::motion::{MOTION_FEATURE_DIM, MOTION_LAYOUT_VERSION};
 use crate::neural::config::NetConfig;
-use crate::neural::tensors::{NamedTensors, Tensor, WeightError};
+use crate::neural::tensors::{
+    NamedTensors, POSE_MAX, POSE_MIN, SEED_MOTION, SEED_MUSIC, Tensor, WeightError,
+};
 use crate::neural::token::Normalizer;
 use crate::rig::JOINT_COUNT;
 use dsp::feature::{FEATURE_DIM, FEATURE_LAYOUT_VERSION};
@@ -23,14 +25,6 @@ pub const MAGIC: &[u8; 8] = b"DANCEDNN";
 pub const FORMAT_VERSION: u32 = 2;
 /// Frames per second every model here runs at.
 pub const FRAME_RATE: f64 = 25.0;
-/// Name of the lowest value of every pose feature in the training data.
-pub const POSE_MIN: &str = "range.pose_min";
-/// Name of the highest value of every pose feature in the training data.
-pub const POSE_MAX: &str = "range.pose_max";
-/// Name of the seed clip's motion tensor.
-pub const SEED_MOTION: &str = "seed.motion";
-/// Name of the seed clip's music tensor.
-pub const SEED_MUSIC: &str = "seed.music";
 
 /// What went wrong reading or writing a model file.
 #[derive(Debug, Error)]
@@ -84,7 +78,8 @@ pub struct TrainingSummary {
     /// What the model was trained on (data set, split, dances), and under which terms.
     #[serde(default)]
     pub data: String,
-    /// How it was trained: the `danced train` options of the run (and of the runs it resumed).
+    /// How it was trained: the `danced-train dancer` (before, `danced train`) options of the run
+    /// (and of the runs it resumed).
     #[serde(default)]
     pub recipe: String,
 }

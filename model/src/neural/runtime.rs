@@ -1,16 +1,13 @@
-//! Live inference in plain Rust: the network of [`crate::neural::net::Net`] run one token at
+//! Live inference in plain Rust: the network that training's `Net` scores in batches, run one token at
 //! a time with a key/value cache over the last `window` tokens, and the flow inverted for one
 //! sample. Every buffer is allocated in [`Runtime::new`]; [`Runtime::push`] and
 //! [`Runtime::sample`] never allocate, so they can run on a real-time thread, and each costs
 //! O(window · d_model) per layer, not a re-encode of the window.
 
-use crate::neural::config::NetConfig;
-use crate::neural::flow::COUPLING_SCALE_OFFSET;
-use crate::neural::layers::LN_EPS;
+use crate::neural::config::{COUPLING_SCALE_OFFSET, LN_EPS, NetConfig, rope_frequency};
 use crate::neural::lu;
 use crate::neural::tensors::{NamedTensors, WeightError};
 use crate::neural::token::FLAG_AT;
-use crate::neural::transformer::rope_frequency;
 
 struct Dense {
     w: Vec<f32>,
@@ -311,62 +308,5 @@ impl Runtime {
                 *o = self.flow_tmp[i] * s.an_inv_scale[i] - s.an_bias[i];
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::motion::MOTION_FEATURE_DIM;
-    use crate::neural::cpu_device;
-    use crate::neural::layers::values;
-    use crate::neural::net::Net;
-    use crate::neural::rng::Rng;
-    use crate::neural::tensors::init_net;
-    use crate::neural::token::TOKEN_DIM;
-    use burn::tensor::{Tensor, TensorData};
-
-    #[test]
-    fn streaming_matches_the_batched_network_across_the_window() {
-        let c = NetConfig::tiny();
-        let mut t = init_net(&c, 7);
-        t.perturb(8, 0.1);
-        let device = cpu_device();
-        let net = Net::load(&t, &c, &device).unwrap();
-        let mut rt = Runtime::new(&t, &c).unwrap();
-        // 2.5 windows, so the sliding window (and the ring wrapping) is exercised.
-        let s = c.window * 5 / 2;
-        let mut r = Rng::new(1);
-        let mut tokens: Vec<f32> = (0..s * TOKEN_DIM).map(|_| r.normal()).collect();
-        for i in 0..s {
-            tokens[i * TOKEN_DIM + FLAG_AT] = (i % 3 == 0) as u8 as f32;
-        }
-        let tt =
-            Tensor::<3>::from_data(TensorData::new(tokens.clone(), [1, s, TOKEN_DIM]), &device);
-        let batched = values(net.transformer.forward(tt));
-        let mut worst = 0f32;
-        for i in 0..s {
-            let ctx = rt.push(&tokens[i * TOKEN_DIM..(i + 1) * TOKEN_DIM]);
-            for j in 0..c.d_model {
-                worst = worst.max((ctx[j] - batched[i * c.d_model + j]).abs());
-            }
-        }
-        assert!(
-            worst < 1e-3,
-            "streaming vs batched context differ by {worst}"
-        );
-        // The flow inverse agrees with burn's.
-        let z: Vec<f32> = (0..MOTION_FEATURE_DIM).map(|_| r.normal()).collect();
-        let mut x = vec![0.0; MOTION_FEATURE_DIM];
-        rt.sample(&z, &mut x);
-        let ctx = Tensor::<2>::from_data(TensorData::new(rt.ctx.clone(), [1, c.d_model]), &device);
-        let zt = Tensor::<2>::from_data(TensorData::new(z, [1, MOTION_FEATURE_DIM]), &device);
-        let xb = values(net.flow.inverse(zt, ctx).unwrap());
-        let err = x
-            .iter()
-            .zip(&xb)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f32::max);
-        assert!(err < 1e-3, "flow inverse differs by {err}");
     }
 }

@@ -8,6 +8,15 @@ use thiserror::Error;
 use crate::neural::config::{FlowConfig, NetConfig};
 use crate::neural::rng::Rng;
 
+/// Name of the lowest value of every pose feature in the training data.
+pub const POSE_MIN: &str = "range.pose_min";
+/// Name of the highest value of every pose feature in the training data.
+pub const POSE_MAX: &str = "range.pose_max";
+/// Name of the seed clip's motion tensor.
+pub const SEED_MOTION: &str = "seed.motion";
+/// Name of the seed clip's music tensor.
+pub const SEED_MUSIC: &str = "seed.music";
+
 /// A tensor's shape and row-major values.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tensor {
@@ -180,18 +189,10 @@ pub fn init_net(c: &NetConfig, seed: u64) -> NamedTensors {
     t.insert("norm.pose_std", &[P], vec![1.0; P]);
     t.insert("norm.music_mean", &[M], vec![0.0; M]);
     t.insert("norm.music_std", &[M], vec![1.0; M]);
-    t.insert(crate::neural::file::POSE_MIN, &[P], vec![-1e6; P]);
-    t.insert(crate::neural::file::POSE_MAX, &[P], vec![1e6; P]);
-    t.insert(
-        crate::neural::file::SEED_MOTION,
-        &[c.window, P],
-        vec![0.0; c.window * P],
-    );
-    t.insert(
-        crate::neural::file::SEED_MUSIC,
-        &[c.window, M],
-        vec![0.0; c.window * M],
-    );
+    t.insert(POSE_MIN, &[P], vec![-1e6; P]);
+    t.insert(POSE_MAX, &[P], vec![1e6; P]);
+    t.insert(SEED_MOTION, &[c.window, P], vec![0.0; c.window * P]);
+    t.insert(SEED_MUSIC, &[c.window, M], vec![0.0; c.window * M]);
     let d = c.d_model;
     dense(&mut t, &mut rng, "embed", c.token_dim(), d, false);
     t.insert("embed.none", &[d], vec![0.0; d]);

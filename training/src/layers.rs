@@ -4,7 +4,8 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::neural::tensors::{NamedTensors, WeightError};
+use model::neural::config::LN_EPS;
+use model::neural::tensors::{NamedTensors, WeightError};
 
 /// A trainable parameter from the named tensor `name` of shape `[n]`.
 pub fn param1(
@@ -90,9 +91,6 @@ impl Dense {
         x.matmul(self.w.val()) + self.b.val().unsqueeze::<2>()
     }
 }
-
-/// Epsilon of every layer norm (the live runtime uses the same).
-pub const LN_EPS: f32 = 1e-5;
 
 /// Layer normalisation over the last dimension with gain and bias.
 #[derive(Module, Debug)]

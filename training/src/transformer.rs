@@ -5,18 +5,10 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData, activation};
 
-use crate::neural::config::NetConfig;
-use crate::neural::layers::{Dense, LayerNorm, param1, store};
-use crate::neural::tensors::{NamedTensors, WeightError};
-use crate::neural::token::FLAG_AT;
-
-/// Base of the rotary frequencies.
-pub const ROPE_BASE: f64 = 10_000.0;
-
-/// Rotation frequency of pair `i` of `half` pairs, radians per token.
-pub fn rope_frequency(i: usize, half: usize) -> f64 {
-    ROPE_BASE.powf(-(i as f64) / half as f64)
-}
+use crate::layers::{Dense, LayerNorm, param1, store};
+use model::neural::config::{NetConfig, rope_frequency};
+use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::token::FLAG_AT;
 
 /// One pre-norm block: windowed causal self-attention, then a ReLU feed-forward.
 #[derive(Module, Debug)]

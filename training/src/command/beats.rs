@@ -1,4 +1,4 @@
-//! `danced train-beats`: trains the learned beat activation on songs with exact beats.
+//! `danced-train beats`: trains the learned beat activation on songs with exact beats.
 //!
 //! Every song is streamed through the same analysis that runs live (so the network learns from
 //! exactly the inputs it will see on stage); the networks of the ensemble are written atomically
@@ -9,14 +9,14 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use daemon::offline::{AnalyzeOptions, analyze_file};
+use daemon::output::{read_times, write_atomic};
 use dsp::BEAT_INPUT_DIM;
 use dsp::BeatNetEnsemble;
-use model::beat_training::{BeatSong, BeatTrainConfig, train_beat_activation};
 
-use crate::offline::{AnalyzeOptions, analyze_file};
-use crate::output::{read_times, write_atomic};
+use crate::beat_training::{BeatSong, BeatTrainConfig, train_beat_activation};
 
-/// Options of `danced train-beats`.
+/// Options of `danced-train beats`.
 #[derive(Args, Debug, Clone)]
 pub struct TrainBeatsArgs {
     /// Folder of songs with beats: `NAME.flac|wav|mp3|ogg` beside `NAME.beats` (time in seconds
@@ -68,7 +68,7 @@ fn load_song(audio: &Path, beats: &Path) -> Result<BeatSong> {
     let a = analyze_file(audio, options, &mut |_, _| {})
         .with_context(|| format!("analysing {}", audio.display()))?;
     let frames = a.beat_inputs.len() / BEAT_INPUT_DIM;
-    let first = a.first_hop_s.unwrap_or(0.0) + dsp::analyzer::EVENT_TIME_OFFSET_S;
+    let first = a.first_hop_s.unwrap_or(0.0) + dsp::tracker::EVENT_TIME_OFFSET_S;
     let shifted: Vec<f64> = beats.iter().map(|b| b - first).collect();
     Ok(BeatSong {
         targets: BeatSong::targets_from_beats(&shifted, frames, dsp::hop_rate()),
@@ -76,7 +76,7 @@ fn load_song(audio: &Path, beats: &Path) -> Result<BeatSong> {
     })
 }
 
-/// Runs `danced train-beats`.
+/// Runs `danced-train beats`.
 pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
     let mut pairs = Vec::new();
     for folder in &args.songs {
@@ -102,7 +102,7 @@ pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
         );
     }
     let t = Instant::now();
-    let loaded = crate::pool::parallel_map(&pairs, args.jobs.max(1), |p| {
+    let loaded = daemon::pool::parallel_map(&pairs, args.jobs.max(1), |p| {
         load_song(p, &p.with_extension("beats"))
     });
     let (mut train, mut valid) = (Vec::new(), Vec::new());

@@ -5,16 +5,16 @@ use burn::grad_clipping::GradientClippingConfig;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
-use crate::neural::config::NetConfig;
-use crate::neural::file::NeuralModel;
-use crate::neural::layers::values;
-use crate::neural::net::Net;
-use crate::neural::rng::Rng;
-use crate::neural::tensors::WeightError;
-use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
-use crate::neural::{cpu_device, training_device};
+use crate::device::{cpu_device, training_device};
+use crate::layers::values;
+use crate::net::Net;
 use dsp::feature::FEATURE_DIM as M;
+use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
+use model::neural::config::NetConfig;
+use model::neural::file::NeuralModel;
+use model::neural::rng::Rng;
+use model::neural::tensors::WeightError;
+use model::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 
 /// Shortest key-pose horizon drawn in training, frames (0.5 s).
 pub const KEY_HORIZON_MIN: usize = 12;
@@ -369,8 +369,8 @@ impl Trainer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::neural::file::TrainingSummary;
-    use crate::neural::tensors::init_net;
+    use model::neural::file::TrainingSummary;
+    use model::neural::tensors::init_net;
 
     #[test]
     fn a_few_steps_lower_the_nll_of_a_simple_dance() {

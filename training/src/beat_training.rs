@@ -10,9 +10,9 @@ use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use dsp::beat_activation::{BEAT_INPUT_DIM as I, BeatNetWeights};
 
-use crate::neural::layers::values;
-use crate::neural::rng::Rng;
-use crate::neural::{cpu_device, training_device};
+use crate::device::{cpu_device, training_device};
+use crate::layers::values;
+use model::neural::rng::Rng;
 
 /// One song's network inputs (`[frames][BEAT_INPUT_DIM]`, flat) and beat targets (`[frames]`).
 #[derive(Clone, Debug, Default)]

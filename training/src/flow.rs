@@ -6,14 +6,10 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, activation};
 
-use crate::neural::config::FlowConfig;
-use crate::neural::layers::{Dense, constant2, param1, param2, store, values};
-use crate::neural::lu;
-use crate::neural::tensors::{NamedTensors, WeightError};
-
-/// Added to the coupling's raw scale before the sigmoid, so a fresh coupling scales by
-/// sigmoid(2) ≈ 0.88 and scales stay in (0, 1): bounded, so training cannot explode them.
-pub const COUPLING_SCALE_OFFSET: f32 = 2.0;
+use crate::layers::{Dense, constant2, param1, param2, store, values};
+use model::neural::config::{COUPLING_SCALE_OFFSET, FlowConfig};
+use model::neural::lu;
+use model::neural::tensors::{NamedTensors, WeightError};
 
 /// ln(2π) / 2, the base density's constant per dimension.
 pub const HALF_LN_2PI: f32 = 0.918_938_5;
@@ -268,9 +264,9 @@ impl Flow {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::neural::cpu_device;
-    use crate::neural::rng::Rng;
-    use crate::neural::tensors::init_flow;
+    use crate::device::cpu_device;
+    use model::neural::rng::Rng;
+    use model::neural::tensors::init_flow;
 
     fn flow(c: &FlowConfig, seed: u64, noise: f32) -> Flow {
         let mut t = NamedTensors::default();

@@ -1,0 +1,134 @@
+//! `danced bench beats`: beat tracking accuracy and speed on the annotated data sets.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use dsp::BeatTrackerKind;
+
+use crate::bench;
+use crate::command::tracker::TrackerArg;
+use crate::progress::count_bar;
+
+#[derive(clap::Args, Debug)]
+/// Options of `danced bench beats`.
+pub struct BenchBeatsArgs {
+    /// The shared data folder.
+    #[arg(long, default_value = "../shared/data")]
+    pub data: PathBuf,
+    /// Trackers to compare (default: native, plus aubio when built in).
+    #[arg(long, value_enum)]
+    pub tracker: Vec<TrackerArg>,
+    /// Only these sets (synth-beats, tang2018, madmom-tests).
+    #[arg(long)]
+    pub set: Vec<String>,
+    /// Worker threads (each file is analysed on one thread).
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+    /// Print a row per file.
+    #[arg(long)]
+    pub verbose: bool,
+    /// Override native tracker tuning, e.g. `observation_beta=1.5,prior_octaves=0.8` (for tuning).
+    #[arg(long, default_value = "")]
+    pub beat_params: String,
+}
+
+/// Runs `danced bench beats`.
+pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
+    if !args.data.is_dir() {
+        bail!(
+            "data folder {} not found (pass --data DIR; see the README's Data section)",
+            args.data.display()
+        );
+    }
+    let trackers: Vec<BeatTrackerKind> = if args.tracker.is_empty() {
+        let mut v = vec![BeatTrackerKind::Native];
+        if cfg!(feature = "aubio") {
+            v.push(BeatTrackerKind::Aubio);
+        }
+        v
+    } else {
+        args.tracker.iter().map(|&t| t.into()).collect()
+    };
+    let sets: Vec<bench::BenchSet> = [
+        bench::synth_set(&args.data),
+        bench::tang_set(&args.data),
+        bench::madmom_set(&args.data),
+    ]
+    .into_iter()
+    .filter(|s| args.set.is_empty() || args.set.iter().any(|n| n == s.name))
+    .filter(|s| !s.items.is_empty())
+    .collect();
+    if sets.is_empty() {
+        bail!("no annotated audio found under {}", args.data.display());
+    }
+    let params = dsp::beat::BeatTrackerParams::default()
+        .with_overrides(&args.beat_params)
+        .map_err(anyhow::Error::msg)?;
+    let total: usize = sets.iter().map(|s| s.items.len()).sum::<usize>() * trackers.len();
+    let pb = count_bar(total as u64);
+    let mut rows = Vec::new();
+    let mut details = String::new();
+    for &tracker in &trackers {
+        let mut row = vec![tracker.name().to_string()];
+        let mut all = Vec::new();
+        for set in &sets {
+            let scores = bench::run_set(set, tracker, params, args.jobs, &|name| {
+                pb.set_message(name.to_string());
+                pb.inc(1);
+            });
+            for s in scores.iter().filter(|s| s.error.is_some()) {
+                pb.println(format!(
+                    "{} {}: {}",
+                    set.name,
+                    s.name,
+                    s.error.as_deref().unwrap_or("")
+                ));
+            }
+            let mut extra = String::new();
+            if scores.iter().any(|s| s.downbeat_f.is_some()) {
+                extra += &format!(
+                    ", downbeat F {:.3}",
+                    bench::mean(&scores, |s| s.downbeat_f.unwrap_or(0.0))
+                );
+            }
+            if scores.iter().any(|s| s.onset_f.is_some()) {
+                extra += &format!(
+                    ", onset F {:.3}",
+                    bench::mean(&scores, |s| s.onset_f.unwrap_or(0.0))
+                );
+            }
+            row.push(format!(
+                "{:.3} / {:.3} / {:.3}{extra}",
+                bench::mean(&scores, |s| s.f_measure),
+                bench::mean(&scores, |s| s.cmlt),
+                bench::mean(&scores, |s| s.amlt)
+            ));
+            if args.verbose {
+                details.push_str(&bench::detail_table(set, tracker, &scores));
+            }
+            all.extend(scores);
+        }
+        row.push(format!("{:.0}", bench::speed(&all)));
+        rows.push(row);
+    }
+    pb.finish_and_clear();
+    print!("{details}");
+    println!();
+    println!(
+        "Beats decided ≤ {:.0} ms after they happen; mean F / CMLt / AMLt (±70 ms, first 5 s skipped).",
+        bench::MAX_DECISION_LAG_S * 1000.0
+    );
+    let header: Vec<String> = sets
+        .iter()
+        .map(|s| format!("{} ({} files)", s.name, s.items.len()))
+        .collect();
+    println!(
+        "| tracker | {} | × real time (one core) |",
+        header.join(" | ")
+    );
+    println!("|---{}|---|", "|---".repeat(sets.len()));
+    for row in rows {
+        println!("| {} |", row.join(" | "));
+    }
+    Ok(())
+}

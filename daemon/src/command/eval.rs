@@ -1,0 +1,174 @@
+//! `danced eval`: the motion sources scored on the validation dances' music, next to the ground
+//! truth.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Result;
+use model::source::MotionSource;
+
+use crate::eval::{KEY_HORIZONS_S, LONG_RUN_S};
+
+/// Options of `danced eval`.
+#[derive(clap::Args, Debug)]
+pub struct EvalArgs {
+    /// The shared data folder (holds tang2018/ and tang2018-beats/).
+    #[arg(long, default_value = "../shared/data")]
+    pub data: PathBuf,
+    /// Clip library of the retrieval rows (default: the built-in one).
+    #[arg(long)]
+    pub library: Option<PathBuf>,
+    /// Also score the retrieval dancer on the full library cut from the training split.
+    #[arg(long)]
+    pub full_library: bool,
+    /// Neural model of the neural rows (default: the built-in one).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Only the table of the validation dances (no key poses, unseen songs or long runs).
+    #[arg(long)]
+    pub quick: bool,
+    /// Random seed of the generated rows.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads for loading.
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+}
+
+/// Runs `danced eval`.
+pub fn eval(o: &EvalArgs) -> Result<()> {
+    const NO_ACCENT: &str = "neural, no beat accent";
+    const FRESH_NOISE: &str = "neural, independent noise";
+    const NO_FOOT_LOCK: &str = "neural, no foot lock";
+    let started = Instant::now();
+    let set = crate::eval::EvalSet::load(&o.data, o.jobs)?;
+    eprintln!(
+        "validation dances: {} (loaded in {:.1} s)",
+        set.validation_names().join(" "),
+        started.elapsed().as_secs_f64()
+    );
+    let gt = set.ground_truth();
+    let mut rows = vec![set.score("ground truth", &gt)?];
+    let mut libraries = vec![(
+        "retrieval",
+        crate::dancer::load_library(o.library.as_deref())?.0,
+    )];
+    if o.full_library {
+        libraries.push((
+            "retrieval, full library",
+            crate::dancer::training_library(&o.data, o.jobs)?.0,
+        ));
+    }
+    let temperatures = [0.0f32, 0.5, 1.0];
+    let mut sources: Vec<(String, Box<dyn MotionSource>)> = Vec::new();
+    for (name, lib) in libraries {
+        sources.push((name.to_string(), Box::new(crate::eval::retrieval(lib)?)));
+    }
+    let model = crate::dancer::load_model(o.model.as_deref())?;
+    sources.push((
+        "neural".into(),
+        Box::new(crate::dancer::neural_dancer(&model, o.seed)?),
+    ));
+    // Ablations: the network's own timing, a fresh noise draw every frame, free feet.
+    let mut own_timing = crate::dancer::neural_dancer(&model, o.seed)?;
+    own_timing.set_beat_accent(0.0);
+    sources.push((NO_ACCENT.into(), Box::new(own_timing)));
+    let mut fresh_noise = crate::dancer::neural_dancer(&model, o.seed)?;
+    fresh_noise.set_noise_correlation(0.0);
+    sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
+    let mut free_feet = crate::dancer::neural_dancer(&model, o.seed)?;
+    free_feet.set_foot_lock(0.0);
+    sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
+    let ablation = |name: &str| [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name);
+    for (name, dancer) in sources.iter_mut() {
+        for t in temperatures {
+            let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);
+            let label = format!("{name} T={t}");
+            eprintln!("{label}: {us:.1} µs per frame");
+            rows.push(set.score(&label, &motions)?);
+        }
+    }
+    print!("{}", crate::eval::table(&rows));
+    if o.quick {
+        eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+        return Ok(());
+    }
+    // Key poses: mean joint error at the target frame against the transition length.
+    let bank: Vec<_> = crate::pose_bank::PoseBank::shipped()?
+        .poses()
+        .iter()
+        .map(|p| p.rotations)
+        .collect();
+    let mut key_table =
+        String::from("\n| system (key-pose error at the target frame, cm), announced");
+    for h in KEY_HORIZONS_S {
+        key_table += &format!(" | {h} s ahead");
+    }
+    key_table += " | cues |\n| --- |";
+    key_table += &" --- |".repeat(KEY_HORIZONS_S.len() + 1);
+    key_table += "\n";
+    let mut unaided = crate::dancer::neural_dancer(&model, o.seed)?;
+    unaided.set_key_blend_frames(0);
+    let mut key_sources: Vec<(String, &mut dyn MotionSource)> = sources
+        .iter_mut()
+        .filter(|(n, _)| !n.contains("full") && !ablation(n))
+        .map(|(n, d)| (n.clone(), d.as_mut() as &mut dyn MotionSource))
+        .collect();
+    key_sources.push(("neural without the final blend".into(), &mut unaided));
+    for (name, dancer) in key_sources {
+        for t in [0.0f32, 0.5] {
+            key_table += &format!("| {name} T={t} |");
+            let mut cues = 0;
+            for h in KEY_HORIZONS_S {
+                let (e, n) = set.key_pose_error(&mut *dancer, t, o.seed, &bank, h);
+                key_table += &format!(" {e:.2} |");
+                cues = n;
+            }
+            key_table += &format!(" {cues} |\n");
+        }
+    }
+    print!("{key_table}");
+    // Long runs: no freeze over five minutes on any song.
+    println!(
+        "\n| system | freezes in {:.0} min on each validation song (looped) | songs with a freeze |\n| --- | --- | --- |",
+        LONG_RUN_S / 60.0
+    );
+    for (name, dancer) in sources
+        .iter_mut()
+        .filter(|(n, _)| !n.contains("full") && !ablation(n))
+    {
+        for t in temperatures {
+            let r = set.long_run_freezes(dancer.as_mut(), t, o.seed)?;
+            println!(
+                "| {name} T={t} | {} | {} of {} |",
+                r.freezes,
+                r.songs_with_freezes,
+                set.validation_names().len()
+            );
+        }
+    }
+    // Songs in no training dance, with exact beats: the music-side metrics only.
+    match crate::eval::MusicSet::load(&o.data) {
+        Ok(music) => {
+            let mut music_rows = Vec::new();
+            for (name, dancer) in sources.iter_mut().filter(|(n, _)| !n.contains("full")) {
+                for t in temperatures {
+                    music_rows.push(music.score(
+                        &format!("{name} T={t}"),
+                        dancer.as_mut(),
+                        t,
+                        o.seed,
+                    )?);
+                }
+            }
+            println!(
+                "\nsynth-beats ({} songs in no training dance, exact beats):",
+                music_rows.first().map_or(0, |r| r.songs)
+            );
+            print!("{}", crate::eval::music_table(&music_rows));
+        }
+        Err(e) => eprintln!("synth-beats skipped: {e:#}"),
+    }
+    eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+    Ok(())
+}

@@ -1,0 +1,187 @@
+//! `danced generate`: dance to a song offline, through the streaming analysis, into a BVH.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+
+use crate::command::source::SourceArgs;
+use crate::dancer::{SourceKind, SourceSettings};
+use crate::live::config::Config;
+use crate::offline::{AnalyzeOptions, analyze_file};
+
+#[derive(clap::Args, Debug)]
+/// Options of `danced generate`.
+pub struct GenerateArgs {
+    /// The song.
+    #[arg(long)]
+    pub audio: PathBuf,
+    /// Output BVH file.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub dancer: SourceArgs,
+    /// Stop after this many seconds of audio.
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Sampling temperature (0: always the best-matching clip).
+    #[arg(long, default_value_t = 0.5)]
+    pub temperature: f32,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Retrieval source: cut the full clip library from this data folder's tang2018 training
+    /// split instead of using a library file.
+    #[arg(long, conflicts_with = "library")]
+    pub data: Option<PathBuf>,
+    /// Neural source: start from this bank pose (the "motion prompt") instead of the model's seed.
+    #[arg(long)]
+    pub seed_pose: Option<String>,
+    /// Reach a key pose of the bank at a time: NAME@SECONDS (repeatable), e.g. pose-3@12.5.
+    #[arg(long = "keypose")]
+    pub key_poses: Vec<String>,
+    /// Key-pose bank (TOML; default: the built-in configs/poses/bank.toml).
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    /// How long before its moment a key pose is announced to the dancer, seconds.
+    #[arg(long, default_value_t = 2.0)]
+    pub keypose_lead: f64,
+}
+
+/// Runs `danced generate`.
+pub fn generate(args: &GenerateArgs) -> Result<()> {
+    use model::source::{Controls, MotionSource};
+    let GenerateArgs {
+        audio,
+        out,
+        dancer: source_args,
+        seconds,
+        temperature,
+        seed,
+        data,
+        key_poses,
+        poses: bank_path,
+        keypose_lead,
+        seed_pose,
+    } = args;
+    let (seconds, temperature, seed) = (*seconds, *temperature, *seed);
+    let fps = model::retrieval::RETRIEVAL_FPS;
+    let needs_bank = !key_poses.is_empty() || seed_pose.is_some();
+    let bank = match (needs_bank, bank_path) {
+        (false, _) => crate::pose_bank::PoseBank::default(),
+        (true, Some(p)) => crate::pose_bank::PoseBank::load(p)?,
+        (true, None) => crate::pose_bank::PoseBank::shipped()?,
+    };
+    let bank_pose = |name: &str| -> Result<&crate::pose_bank::NamedPose> {
+        bank.get(name).with_context(|| {
+            let names: Vec<&str> = bank.poses().iter().map(|p| p.name.as_str()).collect();
+            format!(
+                "key pose {name:?} is not in the bank (it has {})",
+                names.join(", ")
+            )
+        })
+    };
+    let mut cues = Vec::new();
+    for spec in key_poses {
+        let (name, at) = crate::key_cue::parse_cue_spec(spec)?;
+        let rotations = bank_pose(&name)?.rotations;
+        cues.push(crate::key_cue::KeyCue {
+            name,
+            rotations,
+            frame: (at * fps).round() as usize,
+        });
+    }
+    let lead_frames = (keypose_lead.max(0.0) * fps).round() as usize;
+    let mut config = Config::default();
+    source_args.apply(&mut config);
+    let kind = if data.is_some() {
+        SourceKind::Retrieval
+    } else {
+        SourceKind::parse(&config.dancer.source).unwrap_or(SourceKind::DEFAULT)
+    };
+    if seed_pose.is_some() && kind != SourceKind::Neural {
+        bail!("--seed-pose is for the neural source");
+    }
+    let started = Instant::now();
+    let mut dancer: Box<dyn MotionSource> = match (kind, data) {
+        // The full library, cut from the training split now (slow, needs ../shared).
+        (SourceKind::Retrieval, Some(data)) => Box::new(
+            model::retrieval::RetrievalDancer::new(
+                crate::dancer::training_library(data, 2)?.0,
+                seed,
+            )
+            .context("starting the retrieval dancer")?,
+        ),
+        (SourceKind::Neural, _) if seed_pose.is_some() => {
+            let model = crate::dancer::load_model(config.dancer.model.as_deref())?;
+            let mut d = crate::dancer::neural_dancer(&model, seed)?;
+            d.set_beat_accent(config.dancer.beat_accent);
+            if let Some(name) = seed_pose {
+                d.set_seed_pose(&crate::dancer::standing_features(
+                    &bank_pose(name)?.rotations,
+                ));
+                d.reset(seed);
+            }
+            Box::new(d)
+        }
+        _ => crate::dancer::open_source(
+            kind,
+            &SourceSettings {
+                model: config.dancer.model.as_deref(),
+                library: config.dancer.library.as_deref(),
+                beat_accent: Some(config.dancer.beat_accent),
+            },
+            seed,
+        )?,
+    };
+    let load_s = started.elapsed().as_secs_f64();
+    let opts = AnalyzeOptions::native(Some(dancer.frame_rate()));
+    let a = analyze_file(audio, opts, &mut |_, _| {})
+        .with_context(|| format!("analysing {}", audio.display()))?;
+    let limit = seconds.map_or(usize::MAX, |s| (s * dancer.frame_rate()) as usize);
+    let music: Vec<[f32; dsp::feature::FEATURE_DIM]> =
+        a.features.iter().map(|f| f.values).collect();
+    let look = dancer.lookahead_frames();
+    let mut pose = model::rig::Pose::rest();
+    let mut poses = Vec::with_capacity(music.len().min(limit));
+    let step_start = Instant::now();
+    for i in 0..music.len().min(limit) {
+        let controls = Controls {
+            temperature,
+            key_pose: crate::key_cue::target_at(&cues, i, lead_frames),
+            beat_accent: None,
+        };
+        // The frame and its look-ahead, as the live pipeline hands them over (shorter at the end).
+        let window = &music[i..(i + look + 1).min(music.len())];
+        dancer.step(window, &controls, &mut pose);
+        poses.push(pose);
+    }
+    let step_s = step_start.elapsed().as_secs_f64();
+    for c in &cues {
+        match poses.get(c.frame) {
+            Some(p) => println!(
+                "key pose {} at {:.2} s: mean joint error {:.2} cm",
+                c.name,
+                c.frame as f64 / fps,
+                crate::key_cue::key_pose_error_cm(p, &c.rotations)
+            ),
+            None => println!("key pose {} lies after the end of the motion", c.name),
+        }
+    }
+    let skeleton = model::rig::Skeleton::default_adult();
+    model::bvh::export(&skeleton, &poses, dancer.frame_rate())
+        .write(out)
+        .with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "{}: {} frames ({:.1} s) at {} fps by the {} dancer → {} (loaded in {:.1} s, {:.1} µs per frame)",
+        audio.display(),
+        poses.len(),
+        poses.len() as f64 / dancer.frame_rate(),
+        dancer.frame_rate(),
+        kind.name(),
+        out.display(),
+        load_s,
+        1e6 * step_s / poses.len().max(1) as f64
+    );
+    Ok(())
+}

@@ -1,0 +1,18 @@
+//! The `danced` commands, one module each; `main.rs` only parses and dispatches.
+
+pub mod analyze;
+pub mod bench_beats;
+pub mod bench_live;
+pub mod bench_model;
+pub mod bvh_export;
+pub mod dataset;
+pub mod demo;
+pub mod devices;
+pub mod eval;
+pub mod generate;
+pub mod library;
+pub mod metrics;
+pub mod moved;
+pub mod run;
+pub mod source;
+pub mod tracker;

@@ -1,0 +1,4 @@
+//! The `danced-train` subcommands, one module each.
+
+pub mod beats;
+pub mod dancer;
