@@ -20,6 +20,10 @@ pub struct RunArgs {
     /// Capture from the first input whose name contains this text.
     #[arg(long)]
     pub device: Option<String>,
+    /// Capture inputs to hear, 1-based, e.g. `1,2` or `3-4` (default 1 and 2; more than two
+    /// are averaged to mono).
+    #[arg(long)]
+    pub channels: Option<String>,
     /// Replay speed (audio seconds per wall second).
     #[arg(long)]
     pub speed: Option<f64>,
@@ -79,6 +83,10 @@ pub fn run(args: RunArgs) -> Result<()> {
     if let Some(d) = args.device {
         config.audio.device = Some(d);
         config.audio.input = None;
+    }
+    if let Some(c) = &args.channels {
+        let list = crate::live::input_mix::parse_channel_list(c).map_err(anyhow::Error::msg)?;
+        config.audio.channels = Some(list);
     }
     if let Some(s) = args.speed {
         config.audio.speed = s;
