@@ -210,7 +210,7 @@ pub fn summary(r: &StatsReport) -> String {
          cpu          {:.1} % of one core, {} threads at real-time priority\n\
          memory       RSS start {:.1} MiB, end {:.1} MiB, max {:.1} MiB (first minute max {:.1}, last minute max {:.1})\n\
          allocations  capture {}, analysis {}, motion {}, sender {}{}\n\
-         audio        {} frames dropped, {} stream errors, {} stalls, {} reconnects ({} failed tries), {} frames of silence inserted\n\
+         audio        {} frames dropped, {} stream errors, {} stalls, {} reconnects ({} failed tries), {} blocks contended, {} old streams stuck, {} frames of silence inserted\n\
          queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
          packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
          controls     {} applied, {} rejected, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
@@ -254,6 +254,8 @@ pub fn summary(r: &StatsReport) -> String {
         r.capture_stalls,
         r.reconnects,
         r.reconnect_failures,
+        r.capture_contended,
+        r.capture_streams_stuck,
         r.silence_frames,
         r.features_dropped,
         r.anchors_dropped,

@@ -149,15 +149,15 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     let port = native.local_addr().unwrap().port();
     let stats_path = dir.join("stats.json");
     let start = Instant::now();
-    let rx = events(native, start + Duration::from_secs(19));
-    let child = danced()
+    let rx = events(native, start + Duration::from_secs(23));
+    let mut child = danced()
         .env("PULSE_SOURCE", format!("{sink}.monitor"))
-        .args(["run", "--device", "pulseaudio", "--duration", "18"])
+        .args(["run", "--device", "pulseaudio", "--duration", "22"])
         .args(["--control-port", "0", "--osc", &format!("127.0.0.1:{port}")])
         .arg("--stats-json")
         .arg(&stats_path)
         .stdout(Stdio::null())
-        .stderr(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("stderr.txt")).unwrap())
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_secs(1));
@@ -179,15 +179,25 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     let restarted = Instant::now();
     std::thread::sleep(Duration::from_millis(1500));
     let replayed = play(Instant::now());
-    let out = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
+    // A stuck teardown must fail the test, not hang it.
+    let mut status = None;
+    while start.elapsed() < Duration::from_secs(45) && status.is_none() {
+        status = child.try_wait().unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let err = std::fs::read_to_string(dir.join("stderr.txt")).unwrap_or_default();
+    let Some(status) = status else {
+        let _ = child.kill();
+        panic!("danced did not stop after its 22 s: {err}");
+    };
+    assert!(status.success(), "{err}");
     let got = rx.join().unwrap();
     let s = stats(&stats_path);
     eprintln!("{s}");
 
     // Beats against the clicks, on the stream clock: the first onset of each playback is its
-    // first click; from 4 s into it, every beat lies within 70 ms of a click.
+    // first click; from 2 s into it (the tracker relocks after the outage), every beat lies
+    // within 70 ms of a click.
     let mut worst = Vec::new();
     for (from, to) in [
         (played, killed),
@@ -206,8 +216,17 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
             .iter()
             .filter(|(at, addr, _)| *at > from && *at < to && addr == "/danced/beat")
             .map(|e| e.2)
-            .filter(|t| *t > first + 4.0 && *t < first + 7.5)
+            .filter(|t| *t > first + 2.0 && *t < first + 4.6)
             .collect();
+        let all: Vec<String> = got
+            .iter()
+            .filter(|(at, addr, _)| *at > from && *at < to && addr == "/danced/beat")
+            .map(|e| format!("{:.2}", e.2 - first))
+            .collect();
+        eprintln!(
+            "beats after the first onset ({first:.2} s): {}",
+            all.join(" ")
+        );
         assert!(
             beats.len() >= 5,
             "{} beats after {:?}",
@@ -231,7 +250,7 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     assert!(worst.iter().all(|w| *w <= 0.070), "{worst:?}");
     // The dancer never stopped, the device came back, and both are counted.
     let frames = s["frames_sent"].as_u64().unwrap();
-    assert!(frames as f64 > 55.0 * 16.0, "{frames} frames");
+    assert!(frames as f64 > 55.0 * 20.0, "{frames} frames");
     assert!(s["reconnects"].as_u64().unwrap() >= 1, "{s}");
     assert!(s["silence_frames"].as_u64().unwrap() > 0, "{s}");
     let back = got

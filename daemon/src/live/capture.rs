@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use cpal::traits::{DeviceTrait, HostTrait, StreamTrait};
 use cpal::{
-    ErrorKind, SampleFormat, StreamConfig, SupportedStreamConfig, SupportedStreamConfigRange,
+    BufferSize, ErrorKind, SampleFormat, StreamConfig, SupportedBufferSize, SupportedStreamConfig,
+    SupportedStreamConfigRange,
 };
 use thiserror::Error;
 
@@ -142,63 +143,79 @@ pub fn choose_config(device: &cpal::Device) -> Result<SupportedStreamConfig, Cap
     })
 }
 
-/// Where the ring writer waits while no stream owns it. The supervisor takes it to build a
-/// stream; the stream's callback state puts it back when cpal drops the callback. Only the
-/// supervisor and that drop touch the lock: the callback itself owns the writer outright.
-type WriterSlot = Arc<Mutex<Option<RingWriter>>>;
+/// The ring writer, shared by the streams a run builds one after another. Only the newest
+/// stream's callback may write (its generation is the current one); a stream being torn down
+/// — or one stuck in its driver after a sound server crashed — is ignored. The callback only
+/// ever `try_lock`s (an old and a new callback can overlap for a block; the loser's block is
+/// counted in `capture_contended`), and nothing else locks it while a run is live.
+struct SharedWriter {
+    writer: Mutex<RingWriter>,
+    generation: AtomicU64,
+}
 
 /// What the stream callback owns.
 struct CallbackState {
-    writer: Option<RingWriter>,
+    shared: Arc<SharedWriter>,
+    generation: u64,
     mix: InputMix,
     rate: u32,
-    slot: WriterSlot,
     last_callback_ns: Arc<AtomicU64>,
     epoch: std::time::Instant,
+    stats: Arc<super::stats::Stats>,
 }
 
 impl CallbackState {
     fn on_block(&mut self, data: &cpal::Data) {
         in_callback(|| {
-            let now = self.epoch.elapsed().as_nanos() as u64;
+            if self.shared.generation.load(Ordering::Acquire) != self.generation {
+                return;
+            }
+            let now = (self.epoch.elapsed().as_nanos() as u64).max(1);
             self.last_callback_ns.store(now, Ordering::Relaxed);
-            if let Some(w) = self.writer.as_mut() {
-                self.mix.write(data, self.rate, w);
+            match self.shared.writer.try_lock() {
+                Ok(mut w) => {
+                    self.mix.write(data, self.rate, &mut w);
+                }
+                Err(_) => {
+                    self.stats.capture_contended.fetch_add(1, Ordering::Relaxed);
+                }
             }
         })
     }
 }
 
-impl Drop for CallbackState {
-    fn drop(&mut self) {
-        if let Some(w) = self.writer.take()
-            && let Ok(mut slot) = self.slot.lock()
-        {
-            *slot = Some(w);
-        }
+/// Drops a stream on a thread of its own: tearing one down joins cpal's worker, which a
+/// crashed sound server can leave stuck in its driver forever (seen with ALSA's pulse plugin
+/// when PulseAudio is killed). The supervisor never waits for it; `capture_streams_stuck`
+/// counts those not yet gone.
+fn retire(stream: cpal::Stream, stats: &Arc<super::stats::Stats>) {
+    stats.capture_streams_stuck.fetch_add(1, Ordering::Relaxed);
+    let stats = stats.clone();
+    let spawned = std::thread::Builder::new()
+        .name("danced-capture-retire".into())
+        .spawn(move || {
+            drop(stream);
+            stats.capture_streams_stuck.fetch_sub(1, Ordering::Relaxed);
+        });
+    if spawned.is_err() {
+        tracing::warn!("could not start a thread to close the old audio stream; leaving it open");
     }
-}
-
-/// Takes the writer from its slot, waiting up to 2 s for a dropped stream to hand it back.
-fn take_writer(slot: &WriterSlot) -> Option<RingWriter> {
-    for _ in 0..200 {
-        if let Some(w) = slot.lock().ok().and_then(|mut s| s.take()) {
-            return Some(w);
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    None
 }
 
 fn build_stream(
     device: &cpal::Device,
     config: &SupportedStreamConfig,
     mix: InputMix,
-    slot: &WriterSlot,
+    shared: &Arc<SharedWriter>,
     ctx: &LiveContext,
     health: &StreamHealth,
 ) -> Result<cpal::Stream, CaptureError> {
-    let stream_config: StreamConfig = config.config();
+    let mut stream_config: StreamConfig = config.config();
+    // A short period where the device lets us choose: the backend's default can be hundreds
+    // of milliseconds (ALSA's pulse plugin), which the dancer would pay as latency.
+    if let SupportedBufferSize::Range { min, max } = *config.buffer_size() {
+        stream_config.buffer_size = BufferSize::Fixed(CALLBACK_FRAMES.clamp(min, max));
+    }
     let stats = ctx.stats.clone();
     let broken = health.broken.clone();
     let on_error = move |e: cpal::Error| {
@@ -216,22 +233,21 @@ fn build_stream(
         device: device_name(device),
         reason: e.to_string(),
     };
-    let writer = take_writer(slot).ok_or_else(|| CaptureError::Stream {
-        device: device_name(device),
-        reason: "the previous stream never released the audio ring".into(),
-    })?;
+    // 0 until the first callback: a stream gets longer to start than to keep delivering.
+    health.last_callback_ns.store(0, Ordering::Relaxed);
     health
-        .last_callback_ns
+        .started_ns
         .store(ctx.epoch.elapsed().as_nanos() as u64, Ordering::Relaxed);
     let mut state = CallbackState {
-        writer: Some(writer),
+        shared: shared.clone(),
+        // This stream's callbacks write; every older stream's are ignored from now on.
+        generation: shared.generation.fetch_add(1, Ordering::AcqRel) + 1,
         mix,
         rate: stream_config.sample_rate,
-        slot: slot.clone(),
         last_callback_ns: health.last_callback_ns.clone(),
         epoch: ctx.epoch,
+        stats: ctx.stats.clone(),
     };
-    // On failure cpal drops the callback, and with it `state`, which returns the writer.
     let stream = device
         .build_input_stream_raw(
             stream_config,
@@ -249,6 +265,21 @@ fn build_stream(
 struct StreamHealth {
     broken: Arc<AtomicBool>,
     last_callback_ns: Arc<AtomicU64>,
+    started_ns: AtomicU64,
+}
+
+impl StreamHealth {
+    /// Whether the stream has stopped delivering: no callback for [`STALL_AFTER`] once it
+    /// has started, or none at all within [`START_WITHIN`] of being built.
+    fn stalled(&self, now_ns: u64) -> bool {
+        let last = self.last_callback_ns.load(Ordering::Relaxed);
+        if last == 0 {
+            let started = self.started_ns.load(Ordering::Relaxed);
+            now_ns.saturating_sub(started) > START_WITHIN.as_nanos() as u64
+        } else {
+            now_ns.saturating_sub(last) > STALL_AFTER.as_nanos() as u64
+        }
+    }
 }
 
 /// How a stream was opened, for the banner and `danced devices`.
@@ -268,7 +299,7 @@ fn describe(device: &str, config: &SupportedStreamConfig, mix: &InputMix) -> Str
 fn open(
     settings: &CaptureSettings,
     exact_name: Option<&str>,
-    slot: &WriterSlot,
+    shared: &Arc<SharedWriter>,
     ctx: &LiveContext,
     health: &StreamHealth,
 ) -> Result<(cpal::Stream, String, String), CaptureError> {
@@ -291,12 +322,18 @@ fn open(
     })?;
     let desc = describe(&name, &config, &mix);
     health.broken.store(false, Ordering::Relaxed);
-    let stream = build_stream(&device, &config, mix, slot, ctx, health)?;
+    let stream = build_stream(&device, &config, mix, shared, ctx, health)?;
     Ok((stream, name, desc))
 }
 
+/// Frames per callback asked of devices that let us choose (10.7 ms at 48 kHz).
+pub const CALLBACK_FRAMES: u32 = 512;
+
 /// A stream silent this long is taken as stalled and rebuilt.
 pub const STALL_AFTER: Duration = Duration::from_millis(400);
+/// A new stream that has not called back this long after being built is rebuilt (a sound
+/// server that has just come back can take a second to start a stream).
+pub const START_WITHIN: Duration = Duration::from_millis(2000);
 
 /// Opens the input and starts the supervisor thread that keeps it open until the run stops:
 /// a stream the backend reports lost, or one that stops calling back for [`STALL_AFTER`], is
@@ -308,7 +345,10 @@ pub fn spawn(
     writer: RingWriter,
     ctx: &LiveContext,
 ) -> Result<(JoinHandle<()>, String), CaptureError> {
-    let slot: WriterSlot = Arc::new(Mutex::new(Some(writer)));
+    let shared = Arc::new(SharedWriter {
+        writer: Mutex::new(writer),
+        generation: AtomicU64::new(0),
+    });
     let (tx, rx) = crossbeam_channel::bounded(1);
     let ctx = ctx.clone();
     let handle = std::thread::Builder::new()
@@ -317,9 +357,10 @@ pub fn spawn(
             let health = StreamHealth {
                 broken: Arc::new(AtomicBool::new(false)),
                 last_callback_ns: Arc::new(AtomicU64::new(0)),
+                started_ns: AtomicU64::new(0),
             };
             // The stream is owned by this thread for its whole life (cpal streams need not be Send).
-            let (mut stream, name) = match open(&settings, None, &slot, &ctx, &health) {
+            let (mut stream, name) = match open(&settings, None, &shared, &ctx, &health) {
                 Ok((s, name, desc)) => {
                     let _ = tx.send(Ok(desc));
                     (Some(s), name)
@@ -330,12 +371,10 @@ pub fn spawn(
                 }
             };
             let mut backoff = Duration::from_millis(100);
-            let stall_ns = STALL_AFTER.as_nanos() as u64;
             while !ctx.stopped() {
                 std::thread::sleep(Duration::from_millis(50));
                 let now = ctx.epoch.elapsed().as_nanos() as u64;
-                let silent_ns = now.saturating_sub(health.last_callback_ns.load(Ordering::Relaxed));
-                let stalled = stream.is_some() && silent_ns > stall_ns;
+                let stalled = stream.is_some() && health.stalled(now);
                 if stalled {
                     ctx.stats.capture_stalls.fetch_add(1, Ordering::Relaxed);
                     tracing::warn!(
@@ -345,8 +384,9 @@ pub fn spawn(
                 if !health.broken.load(Ordering::Relaxed) && stream.is_some() && !stalled {
                     continue;
                 }
-                if stream.take().is_some() {
+                if let Some(lost) = stream.take() {
                     // Lost: the pipeline analyses silence meanwhile; retry right away once.
+                    retire(lost, &ctx.stats);
                     backoff = Duration::from_millis(100);
                 } else {
                     let mut waited = Duration::ZERO;
@@ -355,7 +395,7 @@ pub fn spawn(
                         waited += Duration::from_millis(50);
                     }
                 }
-                match open(&settings, Some(&name), &slot, &ctx, &health) {
+                match open(&settings, Some(&name), &shared, &ctx, &health) {
                     Ok((s, _, desc)) => {
                         tracing::info!("audio input back: {desc}");
                         ctx.stats.reconnects.fetch_add(1, Ordering::Relaxed);
@@ -369,7 +409,9 @@ pub fn spawn(
                     }
                 }
             }
-            drop(stream);
+            if let Some(s) = stream {
+                retire(s, &ctx.stats);
+            }
         })
         .map_err(|e| CaptureError::Stream {
             device: "capture thread".into(),
@@ -391,7 +433,6 @@ pub fn spawn(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cpal::SupportedBufferSize;
 
     fn range(channels: u16, min: u32, max: u32, f: SampleFormat) -> SupportedStreamConfigRange {
         SupportedStreamConfigRange::new(channels, min, max, SupportedBufferSize::Unknown, f)

@@ -171,6 +171,10 @@ pub struct Stats {
     pub reconnect_failures: AtomicU64,
     /// Times a capture stream stopped calling back and was rebuilt.
     pub capture_stalls: AtomicU64,
+    /// Capture blocks dropped because an old and a new stream's callbacks overlapped.
+    pub capture_contended: AtomicU64,
+    /// Replaced capture streams whose teardown has not returned (stuck in their driver).
+    pub capture_streams_stuck: AtomicU64,
     /// Feature frames lost because the analysis → motion queue was full.
     pub features_dropped: AtomicU64,
     /// Audio-clock anchors lost because the analysis → sender queue was full.
@@ -246,6 +250,8 @@ impl Stats {
             reconnects: AtomicU64::new(0),
             reconnect_failures: AtomicU64::new(0),
             capture_stalls: AtomicU64::new(0),
+            capture_contended: AtomicU64::new(0),
+            capture_streams_stuck: AtomicU64::new(0),
             features_dropped: AtomicU64::new(0),
             anchors_dropped: AtomicU64::new(0),
             poses_dropped: AtomicU64::new(0),
@@ -337,6 +343,8 @@ impl Stats {
             reconnects: load(&self.reconnects),
             reconnect_failures: load(&self.reconnect_failures),
             capture_stalls: load(&self.capture_stalls),
+            capture_contended: load(&self.capture_contended),
+            capture_streams_stuck: load(&self.capture_streams_stuck),
             features_dropped: load(&self.features_dropped),
             anchors_dropped: load(&self.anchors_dropped),
             poses_dropped: load(&self.poses_dropped),
@@ -421,6 +429,11 @@ pub struct StatsReport {
     pub reconnect_failures: u64,
     /// Capture streams that stopped calling back and were rebuilt.
     pub capture_stalls: u64,
+    /// Capture blocks dropped while an old and a new stream's callbacks overlapped.
+    pub capture_contended: u64,
+    /// Replaced capture streams whose teardown had not returned at the end (stuck in their
+    /// driver; their threads are abandoned, not waited for).
+    pub capture_streams_stuck: u64,
     /// Feature frames lost on the way to the motion thread (queue full).
     pub features_dropped: u64,
     /// Audio-clock anchors lost on the way to the sender (queue full).
