@@ -106,6 +106,10 @@ fn a_64_channel_alsa_device_is_captured_without_a_panic() {
     // is counted; the dancer keeps dancing at the full rate regardless.
     assert!(s["frames_sent"].as_u64().unwrap() > 120, "{s}");
     assert!(s["model_frames"].as_u64().unwrap() > 40, "{s}");
+    assert!(
+        s["drops"].as_u64().unwrap() > 0,
+        "the overflow is counted: {s}"
+    );
     assert_eq!(s["allocations"]["capture"], 0, "{s}");
 }
 
@@ -188,6 +192,7 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     let err = std::fs::read_to_string(dir.join("stderr.txt")).unwrap_or_default();
     let Some(status) = status else {
         let _ = child.kill();
+        let _ = child.wait();
         panic!("danced did not stop after its 22 s: {err}");
     };
     assert!(status.success(), "{err}");

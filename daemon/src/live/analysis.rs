@@ -340,4 +340,54 @@ mod tests {
             while feature_rx.pop().is_ok() {}
         }
     }
+
+    #[test]
+    fn full_queues_drop_the_newest_and_count_it() {
+        let stats = Stats::new();
+        let (features, _features_rx) = rtrb::RingBuffer::new(4);
+        let (events, _events_rx) = rtrb::RingBuffer::new(1);
+        let (anchors, _anchors_rx) = rtrb::RingBuffer::new(1);
+        let mut queues = AnalysisQueues {
+            features,
+            events,
+            anchors,
+            motion_thread: std::thread::current(),
+        };
+        let mut out = Out {
+            queues: &mut queues,
+            stats: &stats,
+            base_time_s: 0.0,
+            ingest_wall_ns: 0,
+            grid: BeatGrid::default(),
+        };
+        for i in 0..3 {
+            out.anchor(Anchor {
+                audio_end_s: f64::from(i),
+                wall_ns: 0,
+            });
+        }
+        let mut an = Analyzer::new(AnalyzerConfig {
+            sample_rate: 48_000,
+            channels: 1,
+            model_rate: Some(25.0),
+            tracker: dsp::BeatTrackerKind::Native,
+            beat_params: Default::default(),
+        })
+        .unwrap();
+        let silence = vec![0.0f32; SILENCE_SAMPLES];
+        process_silence(&mut an, &silence, 48_000, 1, &mut out);
+        let n = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
+        // A second of audio makes ~24 feature frames and tens of slow events.
+        assert!(
+            n(&stats.features_dropped) >= 18,
+            "{}",
+            n(&stats.features_dropped)
+        );
+        assert!(
+            n(&stats.events_dropped) >= 10,
+            "{}",
+            n(&stats.events_dropped)
+        );
+        assert_eq!(n(&stats.anchors_dropped), 2);
+    }
 }
