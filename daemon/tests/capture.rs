@@ -221,7 +221,7 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
             .iter()
             .filter(|(at, addr, _)| *at > from && *at < to && addr == "/danced/beat")
             .map(|e| e.2)
-            .filter(|t| *t > first + 2.0 && *t < first + 4.6)
+            .filter(|t| *t > first + 1.9 && *t < first + 4.9)
             .collect();
         let all: Vec<String> = got
             .iter()

@@ -9,7 +9,7 @@ use crossbeam_channel::{Receiver, unbounded};
 use daemon::live::control_queue::ControlHub;
 use daemon::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
 use daemon::live::replay::{self, ReplayAudio, ReplaySettings};
-use daemon::live::sink::{ChannelSink, MemoryPoseBank, SinkItem};
+use daemon::live::sink::{ChannelSink, FrameSink, MemoryPoseBank, SinkItem};
 use daemon::live::stats::StatsReport;
 use daemon::live::wire::{AnalysisEvent, BodyFrame, ControlEvent, Quantize};
 use dsp::feature::FEATURE_DIM;
@@ -340,4 +340,74 @@ fn keeps_dancing_when_the_audio_stops() {
         "{} model frames",
         r.seen.len()
     );
+}
+
+/// Passes everything on, but blocks for `stall` on its first frame (a sender thread that
+/// lost the CPU, a wedged network stack).
+struct StallingSink {
+    inner: ChannelSink,
+    stall: Option<Duration>,
+}
+
+impl FrameSink for StallingSink {
+    fn send_frame(&mut self, frame: &BodyFrame) {
+        if let Some(d) = self.stall.take() {
+            std::thread::sleep(d);
+        }
+        self.inner.send_frame(frame);
+    }
+    fn send_event(&mut self, event: &AnalysisEvent) {
+        self.inner.send_event(event);
+    }
+    fn packets_sent(&self) -> u64 {
+        self.inner.packets_sent()
+    }
+}
+
+#[test]
+fn a_stalled_sender_is_counted_and_its_full_pose_queue_too() {
+    // 12 s of audio at 8×: 300 model frames in 1.5 s of wall time, while the sender is stuck
+    // for 2 s in its first frame; the pose queue (256) overflows and the sender rejoins its
+    // grid afterwards instead of bursting.
+    let ctx = LiveContext::new();
+    let (writer, reader) = ctx.ring();
+    let (tx, rx): (_, Receiver<SinkItem>) = unbounded();
+    let seen = Arc::new(Mutex::new(Vec::with_capacity(10_000)));
+    let bank = MemoryPoseBank::new();
+    let hub = ControlHub::new(&bank, ctx.stats.clone());
+    let pipeline = Pipeline::start(
+        &ctx,
+        PipelineSettings {
+            speed: 8.0,
+            ..PipelineSettings::default()
+        },
+        PipelineParts {
+            source: Box::new(EchoSource { steps: 0, seen }),
+            sink: Box::new(StallingSink {
+                inner: ChannelSink::new(tx),
+                stall: Some(Duration::from_secs(2)),
+            }),
+            controls: hub,
+        },
+        reader,
+    )
+    .unwrap();
+    let replay = replay::spawn(
+        click_track(12.0),
+        ReplaySettings {
+            speed: 8.0,
+            looped: false,
+            duration_s: Some(12.0),
+        },
+        writer,
+        &ctx,
+    )
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(2600));
+    let (report, _) = pipeline.stop().unwrap();
+    ctx.stop.store(true, Ordering::Relaxed);
+    replay.join().unwrap();
+    assert!(report.poses_dropped > 0, "{report:?}");
+    assert!(report.sender_stalls >= 1, "{report:?}");
+    assert!(rx.try_iter().count() > 0);
 }
