@@ -186,16 +186,8 @@ pub fn run(
     let silence_after_ns = (settings.silence_after_s * 1e9) as u64;
     let build = |rate: u32, channels: u16| {
         // A new format is set-up, even inside the loop: it may allocate.
-        uncounted(|| {
-            Analyzer::new(AnalyzerConfig {
-                sample_rate: rate,
-                channels,
-                model_rate: Some(settings.model_rate),
-                tracker: dsp::BeatTrackerKind::Native,
-                beat_params: Default::default(),
-            })
-        })
-        .map_err(|e| format!("analysis of {rate} Hz, {channels} ch audio: {e}"))
+        uncounted(|| Analyzer::new(live_config(rate, channels, settings.model_rate)))
+            .map_err(|e| format!("analysis of {rate} Hz, {channels} ch audio: {e}"))
     };
     let _counting = CountGuard::new(RtThread::Analysis);
     while !stop.load(Ordering::Relaxed) {
@@ -277,6 +269,18 @@ pub fn run(
     Ok(())
 }
 
+/// The analysis the live pipeline runs on `rate` Hz, `channels`-channel audio for a dancer
+/// stepping at `model_rate` Hz.
+fn live_config(rate: u32, channels: u16, model_rate: f64) -> AnalyzerConfig {
+    AnalyzerConfig {
+        sample_rate: rate,
+        channels,
+        model_rate: Some(model_rate),
+        tracker: dsp::BeatTrackerKind::Native,
+        beat_params: Default::default(),
+    }
+}
+
 /// Analyses `frames` frames of silence of `channels` channels, in whole-frame pieces of the
 /// preallocated `silence` buffer (so any channel count fits).
 fn process_silence(
@@ -300,36 +304,46 @@ fn process_silence(
 mod tests {
     use super::*;
 
+    /// The far ends of the analysis queues (kept alive so pushes are not to an abandoned ring).
+    type Consumers = (
+        rtrb::Consumer<FeatureMsg>,
+        rtrb::Consumer<AnalysisEvent>,
+        rtrb::Consumer<Anchor>,
+    );
+
+    /// Analysis queues of the given capacities (features, events, anchors) and their far ends.
+    fn queues(features: usize, events: usize, anchors: usize) -> (AnalysisQueues, Consumers) {
+        let (features, features_rx) = rtrb::RingBuffer::new(features);
+        let (events, events_rx) = rtrb::RingBuffer::new(events);
+        let (anchors, anchors_rx) = rtrb::RingBuffer::new(anchors);
+        let queues = AnalysisQueues {
+            features,
+            events,
+            anchors,
+            motion_thread: std::thread::current(),
+        };
+        (queues, (features_rx, events_rx, anchors_rx))
+    }
+
+    fn out<'a>(queues: &'a mut AnalysisQueues, stats: &'a Stats) -> Out<'a> {
+        Out {
+            queues,
+            stats,
+            base_time_s: 0.0,
+            ingest_wall_ns: 0,
+            grid: BeatGrid::default(),
+        }
+    }
+
     #[test]
     fn silence_for_any_channel_count_fits_the_buffer() {
         // The first 64-channel capture panicked here: 256 frames × 64 ch > the silence buffer.
         let silence = vec![0.0f32; SILENCE_SAMPLES];
         let stats = Stats::new();
         for channels in [1u16, 2, 33, 64, 1000] {
-            let (features, mut feature_rx) = rtrb::RingBuffer::new(1024);
-            let (events, _events_rx) = rtrb::RingBuffer::new(4096);
-            let (anchors, _anchors_rx) = rtrb::RingBuffer::new(16);
-            let mut queues = AnalysisQueues {
-                features,
-                events,
-                anchors,
-                motion_thread: std::thread::current(),
-            };
-            let mut out = Out {
-                queues: &mut queues,
-                stats: &stats,
-                base_time_s: 0.0,
-                ingest_wall_ns: 0,
-                grid: BeatGrid::default(),
-            };
-            let mut an = Analyzer::new(AnalyzerConfig {
-                sample_rate: 48_000,
-                channels,
-                model_rate: Some(25.0),
-                tracker: dsp::BeatTrackerKind::Native,
-                beat_params: Default::default(),
-            })
-            .unwrap();
+            let (mut queues, (feature_rx, _events, _anchors)) = queues(1024, 4096, 16);
+            let mut an = Analyzer::new(live_config(48_000, channels, 25.0)).unwrap();
+            let mut out = out(&mut queues, &stats);
             process_silence(&mut an, &silence, 48_000, usize::from(channels), &mut out);
             // One second of audio: 25 model frames, less the analysis's own latency.
             let frames = feature_rx.slots();
@@ -337,43 +351,21 @@ mod tests {
                 (20..=25).contains(&frames),
                 "{channels} ch: {frames} frames"
             );
-            while feature_rx.pop().is_ok() {}
         }
     }
 
     #[test]
     fn full_queues_drop_the_newest_and_count_it() {
         let stats = Stats::new();
-        let (features, _features_rx) = rtrb::RingBuffer::new(4);
-        let (events, _events_rx) = rtrb::RingBuffer::new(1);
-        let (anchors, _anchors_rx) = rtrb::RingBuffer::new(1);
-        let mut queues = AnalysisQueues {
-            features,
-            events,
-            anchors,
-            motion_thread: std::thread::current(),
-        };
-        let mut out = Out {
-            queues: &mut queues,
-            stats: &stats,
-            base_time_s: 0.0,
-            ingest_wall_ns: 0,
-            grid: BeatGrid::default(),
-        };
+        let (mut queues, _consumers) = queues(4, 1, 1);
+        let mut out = out(&mut queues, &stats);
         for i in 0..3 {
             out.anchor(Anchor {
                 audio_end_s: f64::from(i),
                 wall_ns: 0,
             });
         }
-        let mut an = Analyzer::new(AnalyzerConfig {
-            sample_rate: 48_000,
-            channels: 1,
-            model_rate: Some(25.0),
-            tracker: dsp::BeatTrackerKind::Native,
-            beat_params: Default::default(),
-        })
-        .unwrap();
+        let mut an = Analyzer::new(live_config(48_000, 1, 25.0)).unwrap();
         let silence = vec![0.0f32; SILENCE_SAMPLES];
         process_silence(&mut an, &silence, 48_000, 1, &mut out);
         let n = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
