@@ -12,40 +12,28 @@ use std::time::{Duration, Instant};
 use rosc::{OscPacket, OscType};
 
 mod common;
-use common::{click_track, danced, scratch, write_wav};
+use common::{click_track, danced, receive, scratch, write_wav};
 
 const RATE: u32 = 44_100;
 const BPM: f64 = 120.0;
 const FIRST_CLICK_S: f64 = 0.5;
 
-/// Analysis events received over native OSC: (wall arrival, address, `time_s`).
-fn events(
-    socket: UdpSocket,
-    until: Instant,
-) -> std::thread::JoinHandle<Vec<(Instant, String, f32)>> {
-    std::thread::spawn(move || {
-        socket
-            .set_read_timeout(Some(Duration::from_millis(50)))
-            .unwrap();
-        let mut got = Vec::new();
-        let mut buf = vec![0u8; 65_536];
-        while Instant::now() < until {
-            let Ok(n) = socket.recv(&mut buf) else {
-                continue;
-            };
-            let Ok((_, OscPacket::Message(m))) = rosc::decoder::decode_udp(&buf[..n]) else {
-                continue; // frames come in bundles
+/// Analysis events among received packets: (wall arrival, address, `time_s`).
+fn events(packets: &[(Instant, Vec<u8>)]) -> Vec<(Instant, String, f32)> {
+    packets
+        .iter()
+        .filter_map(|(at, bytes)| {
+            // Frames come in bundles; events are plain messages.
+            let Ok((_, OscPacket::Message(m))) = rosc::decoder::decode_udp(bytes) else {
+                return None;
             };
             let time = m.args.iter().rev().find_map(|a| match a {
                 OscType::Float(f) => Some(*f),
                 _ => None,
-            });
-            if let Some(t) = time {
-                got.push((Instant::now(), m.addr.clone(), t));
-            }
-        }
-        got
-    })
+            })?;
+            Some((*at, m.addr.clone(), time))
+        })
+        .collect()
 }
 
 fn stats(path: &Path) -> serde_json::Value {
@@ -153,7 +141,7 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     let port = native.local_addr().unwrap().port();
     let stats_path = dir.join("stats.json");
     let start = Instant::now();
-    let rx = events(native, start + Duration::from_secs(23));
+    let rx = receive(native, start + Duration::from_secs(23));
     let mut child = danced()
         .env("PULSE_SOURCE", format!("{sink}.monitor"))
         .args(["run", "--device", "pulseaudio", "--duration", "22"])
@@ -196,7 +184,7 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
         panic!("danced did not stop after its 22 s: {err}");
     };
     assert!(status.success(), "{err}");
-    let got = rx.join().unwrap();
+    let got = events(&rx.join().unwrap());
     let s = stats(&stats_path);
     eprintln!("{s}");
 

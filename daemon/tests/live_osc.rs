@@ -12,7 +12,7 @@ use model::rig::{JOINT_COUNT, Joint, Pose, to_unity_rotation};
 use rosc::{OscMessage, OscPacket, OscTime, OscType};
 
 mod common;
-use common::{click_track, danced, scratch, write_wav};
+use common::{click_track, danced, receive, scratch, write_wav};
 
 const RATE: u32 = 44_100;
 const BPM: f64 = 120.0;
@@ -24,23 +24,6 @@ fn free_port() -> u16 {
         .and_then(|s| s.local_addr())
         .map(|a| a.port())
         .unwrap()
-}
-
-/// Collects every datagram arriving on a socket until `until`, with its arrival time.
-fn receive(socket: UdpSocket, until: Instant) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
-    std::thread::spawn(move || {
-        socket
-            .set_read_timeout(Some(Duration::from_millis(50)))
-            .unwrap();
-        let mut got = Vec::new();
-        let mut buf = vec![0u8; 65_536];
-        while Instant::now() < until {
-            if let Ok(n) = socket.recv(&mut buf) {
-                got.push((Instant::now(), buf[..n].to_vec()));
-            }
-        }
-        got
-    })
 }
 
 /// Every message of a packet, with the timetag of the bundle it came in (if any).

@@ -1,8 +1,10 @@
 //! Helpers shared by the binary's integration tests.
 #![allow(dead_code)]
 
+use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 pub fn danced() -> Command {
     Command::new(env!("CARGO_BIN_EXE_danced"))
@@ -59,4 +61,24 @@ pub fn write_wav(path: &Path, samples: &[f32], rate: u32, channels: u16) {
 /// Stereo clicks every beat from `first_s` (see [`daemon::demo_track::click_track`]).
 pub fn click_track(seconds: f64, bpm: f64, first_s: f64, rate: u32) -> (Vec<f32>, Vec<f64>) {
     daemon::demo_track::click_track(seconds, bpm, first_s, rate)
+}
+
+/// Collects every datagram arriving on a socket until `until`, with its arrival time.
+pub fn receive(
+    socket: UdpSocket,
+    until: Instant,
+) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
+    std::thread::spawn(move || {
+        socket
+            .set_read_timeout(Some(Duration::from_millis(50)))
+            .unwrap();
+        let mut got = Vec::new();
+        let mut buf = vec![0u8; 65_536];
+        while Instant::now() < until {
+            if let Ok(n) = socket.recv(&mut buf) {
+                got.push((Instant::now(), buf[..n].to_vec()));
+            }
+        }
+        got
+    })
 }
