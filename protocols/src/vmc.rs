@@ -47,15 +47,6 @@ impl VmcEncoder {
         pool.into_packets()
     }
 
-    /// The frame's packets written into `out`, whose inner buffers are reused; `out` ends up
-    /// holding exactly this frame's packets (spare buffers are freed: the real-time path uses
-    /// [`Self::write_frame`], which keeps them).
-    pub fn encode_frame_into(&mut self, frame: &BodyFrame, out: &mut Vec<Vec<u8>>) {
-        let mut pool = PacketPool::from(std::mem::take(out));
-        self.write_frame(frame, &mut pool);
-        *out = pool.into_packets();
-    }
-
     /// The frame's packets, replacing the pool's; allocates only while the pool grows.
     pub fn write_frame(&mut self, frame: &BodyFrame, pool: &mut PacketPool) {
         pool.clear();
@@ -235,19 +226,20 @@ mod tests {
     #[test]
     fn split_bundles_stay_under_the_limit_and_keep_every_message_in_order() {
         let mut enc = VmcEncoder::new(true);
-        let mut out = vec![vec![1, 2, 3]; 9];
+        let mut pool = PacketPool::from(vec![vec![1, 2, 3]; 9]);
         let f = frame(55);
-        enc.encode_frame_into(&f, &mut out);
+        enc.write_frame(&f, &mut pool);
+        let out = pool.packets();
         assert!(out.len() > 1, "55 bones cannot fit one 1400-byte bundle");
-        for p in &out {
+        for p in out {
             assert!(p.len() <= MAX_SPLIT_BUNDLE_BYTES, "{} bytes", p.len());
         }
-        let split = decode_all(&out);
+        let split = decode_all(out);
         let whole = decode_all(&VmcEncoder::new(false).encode_frame(&f));
         assert_eq!(split, whole);
         let first = out.len();
-        enc.encode_frame_into(&frame(2), &mut out);
-        assert_eq!(out.len(), 1);
+        enc.write_frame(&frame(2), &mut pool);
+        assert_eq!(pool.packets().len(), 1);
         assert!(first > 1);
     }
 

@@ -231,15 +231,6 @@ impl VrchatEncoder {
         pool.into_packets()
     }
 
-    /// The frame's packets written into `out`, whose inner buffers are reused; `out` ends up
-    /// holding exactly this frame's packets (spare buffers are freed: the real-time path uses
-    /// [`Self::write_frame`], which keeps them).
-    pub fn encode_frame_into(&mut self, frame: &BodyFrame, out: &mut Vec<Vec<u8>>) {
-        let mut pool = PacketPool::from(std::mem::take(out));
-        self.write_frame(frame, &mut pool);
-        *out = pool.into_packets();
-    }
-
     /// The frame's packets, replacing the pool's; allocates only while the pool grows.
     ///
     /// Separate messages rather than a bundle: VRChat applies them on arrival anyway, and some
@@ -417,11 +408,11 @@ mod tests {
         assert_eq!(enc.missing_bones(), 0);
 
         // A frame without feet: those trackers are skipped and counted.
-        let mut out = packets;
+        let mut pool = PacketPool::from(packets);
         let mut f2 = frame.clone();
         f2.bones.retain(|b| !b.bone.ends_with("Foot"));
-        enc.encode_frame_into(&f2, &mut out);
-        assert_eq!(out.len(), 14);
+        enc.write_frame(&f2, &mut pool);
+        assert_eq!(pool.packets().len(), 14);
         assert_eq!(enc.missing_bones(), 2);
     }
 
