@@ -29,6 +29,12 @@ pub const TRANSITION_BEATS_RANGE: (f32, f32) = (0.0, MAX_QUANTIZE_BEATS as f32);
 // These ranges are the only definition: the OSC parser, the MIDI map, the daemon's
 // configuration and its control path all read them.
 
+/// Whether `beats` is a usable transition length: finite, above the lower bound of
+/// [`TRANSITION_BEATS_RANGE`] and at most its upper one.
+pub fn valid_transition_beats(beats: f32) -> bool {
+    beats.is_finite() && beats > TRANSITION_BEATS_RANGE.0 && beats <= TRANSITION_BEATS_RANGE.1
+}
+
 /// When a key pose should be reached.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
 #[serde(try_from = "String")]
@@ -240,7 +246,7 @@ impl ControlParser {
             }
             "/transition" => {
                 let beats = one_float(args)?;
-                if !(beats > TRANSITION_BEATS_RANGE.0 && beats <= TRANSITION_BEATS_RANGE.1) {
+                if !valid_transition_beats(beats) {
                     return Err(Reject::BadArguments);
                 }
                 ControlEvent::TransitionBeats(beats)

@@ -5,7 +5,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use protocols::control::{BEAT_ACCENT_RANGE, TEMPERATURE_RANGE, TRANSITION_BEATS_RANGE};
+use protocols::control::{
+    BEAT_ACCENT_RANGE, TEMPERATURE_RANGE, TRANSITION_BEATS_RANGE, valid_transition_beats,
+};
 use serde::Deserialize;
 use thiserror::Error;
 
@@ -295,7 +297,7 @@ impl Config {
             ));
         }
         let (b, (lo, hi)) = (self.dancer.transition_beats, TRANSITION_BEATS_RANGE);
-        if !(b.is_finite() && b > lo && b <= hi) {
+        if !valid_transition_beats(b) {
             return Err(bad(
                 "dancer.transition_beats",
                 format!("= {b}: must be above {lo} and at most {hi}"),

@@ -17,7 +17,7 @@ use std::time::Instant;
 use glam::Quat;
 use model::rig::JOINT_COUNT;
 use protocols::control::{
-    BEAT_ACCENT_RANGE, TEMPERATURE_RANGE, TEMPO_HINT_RANGE, TRANSITION_BEATS_RANGE,
+    BEAT_ACCENT_RANGE, TEMPERATURE_RANGE, TEMPO_HINT_RANGE, valid_transition_beats,
 };
 
 use super::sink::PoseBank;
@@ -253,10 +253,10 @@ impl ControlSender {
                 return Ok(());
             }
             ControlEvent::TransitionBeats(b) => {
-                if b <= TRANSITION_BEATS_RANGE.0 {
+                if !valid_transition_beats(b) {
                     return Err(ControlRefusal::OutOfRange);
                 }
-                self.offer(&p.transition, float(b, TRANSITION_BEATS_RANGE)?);
+                self.offer(&p.transition, u64::from(b.to_bits()));
                 return Ok(());
             }
             ControlEvent::TempoHint(bpm) => {
