@@ -1,6 +1,6 @@
-//! What the analysis, motion and scheduler threads share: the audio clock (when each block of
-//! audio entered the ring) and the newest poses with their audio times. Held in a `Mutex`
-//! locked for microseconds; every buffer is preallocated, so no thread allocates through it.
+//! The sender thread's view of the run: the audio clock (when each block of audio entered the
+//! ring) and the newest poses with their audio times, filled from the queues the analysis and
+//! motion threads write. Owned by the sender alone; every buffer is preallocated.
 
 use model::rig::Pose;
 
@@ -88,7 +88,7 @@ pub struct TimedPose {
     pub pose: Pose,
 }
 
-/// The shared clock and pose history.
+/// The sender's clock and pose history.
 #[derive(Clone, Debug)]
 pub struct Timeline {
     /// One anchor per audio block, oldest first (about 12 s at 256-frame blocks).
