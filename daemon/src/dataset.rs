@@ -276,8 +276,9 @@ pub fn audit_table(rows: &[AuditRow]) -> String {
     s
 }
 
-/// Version of the `dataset build` file layout; bump it when an array or its meaning changes.
-pub const DATASET_VERSION: u32 = 1;
+/// Version of the `dataset build` file layout; bump it when an array or its meaning changes
+/// (2: music is predicted over the data horizon, as a live dancer hears it).
+pub const DATASET_VERSION: u32 = 2;
 
 /// One dance as it enters the training set.
 #[derive(Clone, Debug)]
@@ -384,7 +385,8 @@ pub fn is_validation(name: &str, all_names: &[String]) -> bool {
 
 /// Fits, aligns and featurises one dance at the motion's frame rate (25 fps): motion features
 /// from the fitted rig, music features from the *streaming* analysis of the whole song (the
-/// same code the daemon runs), frame i of the motion paired with the music frame at song time
+/// same code the daemon runs) as a live dancer hears them (predicted over the data horizon,
+/// `crate::horizon`), frame i of the motion paired with the music frame at song time
 /// `start + i / 25`. Frames outside the song are dropped.
 pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<BuiltDance, String> {
     let fit = fit_dance(dance).map_err(|e| e.to_string())?;
@@ -408,6 +410,9 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
     let start_s = align(dance, &track, data)?.estimate.start_s;
     let opts = AnalyzeOptions::native(Some(TANG_FPS));
     let a = analyze_file(audio, opts, &mut |_, _| {}).map_err(|e| e.to_string())?;
+    // What a live dancer hears at each frame: the analysis of a few frames earlier, its beat
+    // grid extrapolated to the frame.
+    let heard = dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS));
     let first = (start_s * TANG_FPS).round() as i64;
     let mut keep_from = None;
     for i in 0..built.motion.len() {
@@ -415,11 +420,11 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
         if k < 0 {
             continue;
         }
-        let Some(frame) = a.features.get(k as usize) else {
+        let Some(frame) = heard.get(k as usize) else {
             break;
         };
         keep_from.get_or_insert(i);
-        built.music.push(frame.values);
+        built.music.push(*frame);
     }
     let from = keep_from.unwrap_or(built.motion.len());
     built.motion = built.motion[from..from + built.music.len()].to_vec();

@@ -374,7 +374,7 @@ impl MusicSet {
             .with_context(|| format!("analysing {}", item.audio.display()))?;
             songs.push((
                 item.name,
-                a.features.iter().map(|f| f.values).collect(),
+                dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS)),
                 item.beats,
             ));
         }

@@ -10,6 +10,7 @@ pub mod dataset;
 pub mod decode;
 pub mod demo_track;
 pub mod eval;
+pub mod horizon;
 pub mod key_cue;
 pub mod live;
 pub mod live_cli;

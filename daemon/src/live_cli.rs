@@ -107,6 +107,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             config.audio.speed
         },
         margin_ms: config.output.margin_ms,
+        lead_ms: config.output.lead_ms,
         temperature: config.dancer.temperature,
         transition_beats: config.dancer.transition_beats,
         beat_accent: Some(config.dancer.beat_accent),
@@ -129,10 +130,11 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     }
     if mode == RunMode::Interactive {
         eprintln!(
-            "{} dancer dancing to {what}; {} Hz out to {targets}; declared look-ahead {:.0} ms; Ctrl-C stops",
+            "{} dancer dancing to {what}; {} Hz out to {targets}; showing the music heard {:+.0} ms from now (poses made {} frames ahead of the analysis); Ctrl-C stops",
             kind.name(),
             settings.rate_hz,
-            pipeline.declared_lookahead_s() * 1000.0
+            settings.lead_ms,
+            pipeline.horizon_frames()
         );
         if let Some(a) = controls.osc_addr {
             eprintln!("OSC control on {a} (/danced/control/...)");
@@ -203,7 +205,7 @@ pub fn summary(r: &StatsReport) -> String {
     let a = &r.allocations;
     format!(
         "ran          {:.1} s, {} frames sent ({:.1} Hz), {} model frames, {} late, {} sender stalls\n\
-         latency      p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (added, beyond the declared look-ahead)\n\
+         latency      p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (added: sent later than the heard music plus the lead)\n\
          processing   p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (audio in → pose ready)\n\
          tick to sent p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms (scheduled tick → send_to returned)\n\
          jitter       p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms (frame spacing − period, at send_to)\n\

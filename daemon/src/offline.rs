@@ -97,6 +97,9 @@ pub struct AnalyzeOptions {
     pub keep_beat_inputs: bool,
     /// Tuning of the native beat tracker.
     pub beat_params: dsp::beat::BeatTrackerParams,
+    /// Song time the analysis starts at, seconds: earlier audio is decoded and skipped, as if
+    /// the stream had begun there (all times are then counted from it).
+    pub start_s: f64,
 }
 
 impl AnalyzeOptions {
@@ -247,12 +250,23 @@ fn stream(
     let mut frames_total = 0u64;
     let block = BLOCK_FRAMES * channels as usize;
     let mut last_report = 0.0;
+    let ch = channels.max(1) as usize;
+    let mut skip = (options.start_s.max(0.0) * f64::from(rate)).round() as u64;
     loop {
         let t = Instant::now();
-        let n = next(&mut packet)?;
+        let mut n = next(&mut packet)?;
         decode_time += t.elapsed();
         if n == 0 {
             break;
+        }
+        if skip > 0 {
+            let drop = (n as u64).min(skip) as usize;
+            skip -= drop as u64;
+            packet.drain(..drop * ch);
+            n -= drop;
+            if n == 0 {
+                continue;
+            }
         }
         frames_total += n as u64;
         let t = Instant::now();

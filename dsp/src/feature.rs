@@ -15,7 +15,13 @@
 //! "Short window" means the feature describes audio centred half a short window (23 ms) before
 //! the frame's stream time; "long window" means 93 ms before. Both add the resampler's delay
 //! (0 at 22 050 Hz input). A frame's `time_s` is the audio time it describes.
+//!
+//! A dancer does not wait for the frame of the time it shows: it is handed
+//! [`FeatureFrame::predicted_at`] of the newest frame, which extrapolates the beat grid to the
+//! shown time and keeps everything else at its newest value. [`predicted_stream`] is the same
+//! for a whole song, so offline generation and training data see exactly what live delivers.
 
+use crate::grid::BeatGrid;
 use crate::hop::HopFrame;
 use crate::mel::MEL_BANDS;
 
@@ -74,6 +80,39 @@ pub struct FeatureFrame {
     pub decided_at_s: f64,
     /// The values, laid out as in [`FeatureLayout`].
     pub values: [f32; FEATURE_DIM],
+    /// The beat grid known when the frame was made (stream seconds).
+    pub grid: BeatGrid,
+}
+
+impl FeatureFrame {
+    /// The features this frame predicts for the frame at `t_s`: beat and bar phase from the beat
+    /// grid extrapolated to `t_s` (exact while the tempo holds), everything else at this frame's
+    /// value (the newest known). Unlocked, the frame's own phases are kept.
+    pub fn predicted_at(&self, t_s: f64) -> [f32; FEATURE_DIM] {
+        let mut v = self.values;
+        if let (Some(beat), Some(bar)) = (self.grid.beat_phase_at(t_s), self.grid.bar_phase_at(t_s))
+        {
+            let (bs, bc) = (std::f64::consts::TAU * beat).sin_cos();
+            let (rs, rc) = (std::f64::consts::TAU * bar).sin_cos();
+            v[FeatureLayout::BEAT_SIN] = bs as f32;
+            v[FeatureLayout::BEAT_COS] = bc as f32;
+            v[FeatureLayout::BAR_SIN] = rs as f32;
+            v[FeatureLayout::BAR_COS] = rc as f32;
+        }
+        v
+    }
+}
+
+/// The music a dancer hears, frame by frame, when each frame is predicted from the analysis
+/// `horizon` frames earlier: element j is `frames[j − horizon].predicted_at(frames[j].time_s)`
+/// (from the first frame while j < horizon). This is what the live pipeline hands a dancer
+/// generating `horizon` frames ahead of the analysis.
+pub fn predicted_stream(frames: &[FeatureFrame], horizon: usize) -> Vec<[f32; FEATURE_DIM]> {
+    frames
+        .iter()
+        .enumerate()
+        .map(|(j, f)| frames[j.saturating_sub(horizon)].predicted_at(f.time_s))
+        .collect()
 }
 
 /// Resamples analysis hops (86.13 Hz) to frames at the model rate: means for spectra and energy,
@@ -142,11 +181,61 @@ impl FeatureFramer {
             time_s: frame_time,
             decided_at_s: hop.decided_at_s,
             values,
+            grid: BeatGrid::from_hop(hop),
         };
         self.next_index += 1;
         self.sum = [0.0; FEATURE_DIM];
         self.onset_max = 0.0;
         self.hops = 0;
         Some(frame)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(index: u64, grid: BeatGrid) -> FeatureFrame {
+        let mut values = [0.0; FEATURE_DIM];
+        values[FeatureLayout::ENERGY] = index as f32;
+        FeatureFrame {
+            index,
+            time_s: index as f64 / 25.0,
+            decided_at_s: index as f64 / 25.0 + 0.03,
+            values,
+            grid,
+        }
+    }
+
+    #[test]
+    fn stream_predicts_phases_and_keeps_the_newest_spectra() {
+        // 120 BPM, a downbeat at 1.0 s in 4/4.
+        let grid = BeatGrid {
+            next_beat_s: 1.0,
+            period_s: 0.5,
+            next_index_in_bar: 1,
+            beats_per_bar: 4,
+            locked: true,
+        };
+        let frames: Vec<FeatureFrame> = (0..60).map(|i| frame(i, grid)).collect();
+        let stream = predicted_stream(&frames, 3);
+        // Frame 25 (1.0 s) is predicted from frame 22: its energy, the grid's downbeat phase.
+        let f = &stream[25];
+        assert_eq!(f[FeatureLayout::ENERGY], 22.0);
+        assert!((f[FeatureLayout::BEAT_COS] - 1.0).abs() < 1e-6);
+        assert!((f[FeatureLayout::BAR_COS] - 1.0).abs() < 1e-6);
+        // A quarter beat later (1.125 s is not a frame; 1.12 s is frame 28): phase 0.24.
+        let f = &stream[28];
+        let phase =
+            f64::from(f[FeatureLayout::BEAT_SIN]).atan2(f64::from(f[FeatureLayout::BEAT_COS]));
+        assert!(
+            (phase / std::f64::consts::TAU - 0.24).abs() < 1e-5,
+            "{phase}"
+        );
+        assert_eq!(stream[1][FeatureLayout::ENERGY], 0.0);
+        // Unlocked, the frame's own phases stay.
+        let mut lost = frame(5, BeatGrid::default());
+        lost.values[FeatureLayout::BEAT_SIN] = 0.5;
+        assert_eq!(lost.predicted_at(9.0)[FeatureLayout::BEAT_SIN], 0.5);
     }
 }

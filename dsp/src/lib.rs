@@ -16,6 +16,7 @@ pub mod beat_activation;
 pub mod chroma;
 pub mod error;
 pub mod feature;
+pub mod grid;
 pub mod hop;
 pub mod mel;
 pub mod meter;
@@ -34,7 +35,8 @@ pub use beat_activation::{
 };
 pub use chroma::ChromaFilterbank;
 pub use error::DspError;
-pub use feature::{FeatureFrame, FeatureFramer, FeatureLayout};
+pub use feature::{FeatureFrame, FeatureFramer, FeatureLayout, predicted_stream};
+pub use grid::{BeatGrid, GridBeat};
 pub use hop::HopFrame;
 pub use mel::MelFilterbank;
 pub use meter::MeterTracker;

@@ -57,6 +57,13 @@ pub trait MotionSource {
     /// Music frames needed beyond the current one in every `step` call.
     fn lookahead_frames(&self) -> usize;
 
+    /// Frames ahead of the analysis its music was predicted by in training
+    /// (`dsp::predicted_stream`): live, the pipeline predicts at least this far, so the source
+    /// hears what it learned on. 0 = no preference.
+    fn horizon_frames(&self) -> usize {
+        0
+    }
+
     /// Produces the next pose from the current music frame (`music[0]`), its look-ahead
     /// (`music[1..]`) and the live controls; never allocates.
     fn step(&mut self, music: &[[f32; FEATURE_DIM]], controls: &Controls, out: &mut Pose);

@@ -49,6 +49,19 @@ pub enum AnalysisEvent {
         /// Tempo at this beat.
         tempo_bpm: f32,
     },
+    /// The beat after the one just shown, announced ahead so effects can be scheduled on it.
+    NextBeat {
+        /// Audio stream time of the beat, seconds.
+        time_s: f64,
+        /// Wall seconds from when the message is sent until the beat is shown.
+        in_s: f32,
+        /// Position of the beat in its bar, 1 = downbeat.
+        index_in_bar: u32,
+        /// Beats in the current bar.
+        beats_per_bar: u32,
+        /// Tempo the prediction assumes.
+        tempo_bpm: f32,
+    },
     /// A note or drum onset.
     Onset {
         /// Audio stream time of the onset, seconds.

@@ -135,6 +135,27 @@ impl NativeEncoder {
                     .float(tempo)
                     .float(time);
             }
+            AnalysisEvent::NextBeat {
+                time_s,
+                in_s,
+                index_in_bar,
+                beats_per_bar,
+                tempo_bpm,
+            } => {
+                let index = self.clamp_i32(index_in_bar);
+                let per_bar = self.clamp_i32(beats_per_bar);
+                let tempo = self.checked(tempo_bpm);
+                let time = self.checked64(time_s);
+                let in_s = self.checked(in_s);
+                OscWriter::new(buf)
+                    .string(&[&self.prefix, "/beat/next"])
+                    .string(&[",iifff"])
+                    .int(index)
+                    .int(per_bar)
+                    .float(tempo)
+                    .float(time)
+                    .float(in_s);
+            }
             AnalysisEvent::Onset { time_s, strength } => {
                 let args = [self.checked(strength), self.checked64(time_s)];
                 self.write_floats(buf, "/onset", &args);
@@ -294,6 +315,23 @@ mod tests {
                     OscType::Int(i32::MAX),
                     OscType::Float(128.0),
                     OscType::Float(3.0),
+                ],
+            ),
+            (
+                AnalysisEvent::NextBeat {
+                    time_s: 3.5,
+                    in_s: 0.25,
+                    index_in_bar: 3,
+                    beats_per_bar: 4,
+                    tempo_bpm: 120.0,
+                },
+                "/danced/beat/next",
+                vec![
+                    OscType::Int(3),
+                    OscType::Int(4),
+                    OscType::Float(120.0),
+                    OscType::Float(3.5),
+                    OscType::Float(0.25),
                 ],
             ),
             (

@@ -204,6 +204,13 @@ impl OscOutput {
                 beats_per_bar: 4,
                 tempo_bpm: 120.0,
             },
+            AnalysisEvent::NextBeat {
+                time_s: 0.0,
+                in_s: 0.0,
+                index_in_bar: 1,
+                beats_per_bar: 4,
+                tempo_bpm: 120.0,
+            },
             AnalysisEvent::Onset {
                 time_s: 0.0,
                 strength: 0.0,

@@ -82,6 +82,8 @@ struct Run {
     frames: Vec<(BodyFrame, std::time::Instant)>,
     events: Vec<AnalysisEvent>,
     seen: Vec<Seen>,
+    /// Model frames past the newest analysed frame the poses were made for.
+    horizon: usize,
 }
 
 /// Replays `seconds` of clicks at `speed`; `controls` are sent at the given wall offsets.
@@ -157,6 +159,7 @@ fn run_until(
         }
         assert!(t < 30.0, "the replay never ended");
     }
+    let horizon = pipeline.horizon_frames();
     let (report, _) = pipeline.stop().unwrap();
     replay.join().unwrap();
     let mut frames = Vec::new();
@@ -173,6 +176,7 @@ fn run_until(
         frames,
         events,
         seen,
+        horizon,
     }
 }
 
@@ -279,7 +283,9 @@ fn fast_replay_frames_beats_and_controls() {
     }
     let hit = countdown.last().unwrap();
     assert_eq!(hit.frames_to_go, Some(0));
-    let t = hit.step as f64 / FPS;
+    // Step s makes the pose of frame s + horizon: the first window is full once frame 2 (the
+    // look-ahead) is analysed, and frames are predicted `horizon` ahead, look-ahead included.
+    let t = (hit.step + r.horizon as u64) as f64 / FPS;
     let k = ((t - FIRST_CLICK_S) * BPM / 60.0).round();
     let click = FIRST_CLICK_S + k * 60.0 / BPM;
     assert!(

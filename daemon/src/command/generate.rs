@@ -21,6 +21,10 @@ pub struct GenerateArgs {
     pub out: PathBuf,
     #[command(flatten)]
     pub dancer: SourceArgs,
+    /// Start dancing this many seconds into the song (the analysis starts there too, as it
+    /// would live; key-pose times stay song times).
+    #[arg(long, default_value_t = 0.0)]
+    pub start: f64,
     /// Stop after this many seconds of audio.
     #[arg(long)]
     pub seconds: Option<f64>,
@@ -55,6 +59,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         audio,
         out,
         dancer: source_args,
+        start,
         seconds,
         temperature,
         seed,
@@ -65,6 +70,10 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         seed_pose,
     } = args;
     let (seconds, temperature, seed) = (*seconds, *temperature, *seed);
+    let start = *start;
+    if !(start.is_finite() && start >= 0.0) {
+        bail!("--start {start}: must be a time in the song, ≥ 0 s");
+    }
     let fps = model::retrieval::RETRIEVAL_FPS;
     let needs_bank = !key_poses.is_empty() || seed_pose.is_some();
     let bank = match (needs_bank, bank_path) {
@@ -88,7 +97,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         cues.push(crate::key_cue::KeyCue {
             name,
             rotations,
-            frame: (at * fps).round() as usize,
+            frame: ((at - start) * fps).round().max(0.0) as usize,
         });
     }
     let lead_frames = (keypose_lead.max(0.0) * fps).round() as usize;
@@ -135,12 +144,24 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         )?,
     };
     let load_s = started.elapsed().as_secs_f64();
-    let opts = AnalyzeOptions::native(Some(dancer.frame_rate()));
+    let opts = AnalyzeOptions {
+        start_s: start,
+        ..AnalyzeOptions::native(Some(dancer.frame_rate()))
+    };
     let a = analyze_file(audio, opts, &mut |_, _| {})
         .with_context(|| format!("analysing {}", audio.display()))?;
+    if a.features.is_empty() {
+        bail!(
+            "{}: nothing to dance to after {start} s (the song lasts {:.1} s)",
+            audio.display(),
+            start + a.duration_s
+        );
+    }
     let limit = seconds.map_or(usize::MAX, |s| (s * dancer.frame_rate()) as usize);
-    let music: Vec<[f32; dsp::feature::FEATURE_DIM]> =
-        a.features.iter().map(|f| f.values).collect();
+    // What the live pipeline hands the dancer at lead 0: each frame predicted from the analysis
+    // `horizon` frames earlier.
+    let horizon = crate::horizon::offline_horizon(&*dancer);
+    let music = dsp::predicted_stream(&a.features, horizon);
     let look = dancer.lookahead_frames();
     let mut pose = model::rig::Pose::rest();
     let mut poses = Vec::with_capacity(music.len().min(limit));
@@ -151,7 +172,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             key_pose: crate::key_cue::target_at(&cues, i, lead_frames),
             beat_accent: None,
         };
-        // The frame and its look-ahead, as the live pipeline hands them over (shorter at the end).
+        // The frame and its look-ahead (shorter at the end).
         let window = &music[i..(i + look + 1).min(music.len())];
         dancer.step(window, &controls, &mut pose);
         poses.push(pose);
@@ -162,7 +183,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             Some(p) => println!(
                 "key pose {} at {:.2} s: mean joint error {:.2} cm",
                 c.name,
-                c.frame as f64 / fps,
+                start + c.frame as f64 / fps,
                 crate::key_cue::key_pose_error_cm(p, &c.rotations)
             ),
             None => println!("key pose {} lies after the end of the motion", c.name),

@@ -54,6 +54,10 @@ pub struct RunArgs {
     /// Frames sent per second.
     #[arg(long)]
     pub rate: Option<f64>,
+    /// Show the dancer this many ms ahead of the heard music, to cancel a renderer's or LED
+    /// wall's display latency (may be negative; default 0).
+    #[arg(long, allow_hyphen_values = true)]
+    pub lead_ms: Option<f64>,
     /// Initial temperature (0 = the most likely motion).
     #[arg(long)]
     pub temperature: Option<f32>,
@@ -117,6 +121,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
     if let Some(r) = args.rate {
         config.output.rate_hz = r;
+    }
+    if let Some(l) = args.lead_ms {
+        config.output.lead_ms = l;
     }
     if let Some(t) = args.temperature {
         config.dancer.temperature = t;

@@ -7,7 +7,6 @@ use std::sync::atomic::Ordering;
 use std::thread::Thread;
 use std::time::Duration;
 
-use dsp::feature::FEATURE_DIM;
 use dsp::{AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, FeatureFrame, HopFrame, OnsetEvent};
 
 use super::pipeline::LiveContext;
@@ -17,32 +16,13 @@ use super::timeline::Anchor;
 use super::wire::AnalysisEvent;
 use crate::alloc_counter::{CountGuard, RtThread, uncounted};
 
-/// The beat grid as known at one moment, for quantising controls.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct BeatGrid {
-    /// Predicted time of the next beat, stream seconds.
-    pub next_beat_s: f64,
-    /// Beat period, seconds (0 while no beat is heard).
-    pub period_s: f64,
-    /// Position in the bar of the beat at `next_beat_s` (1 = downbeat).
-    pub next_index_in_bar: u32,
-    /// Beats per bar.
-    pub beats_per_bar: u32,
-    /// Whether a beat is heard.
-    pub locked: bool,
-}
-
 /// One feature frame on its way to the motion thread.
 #[derive(Clone, Copy, Debug)]
 pub struct FeatureMsg {
-    /// Audio time the frame describes, stream seconds.
-    pub time_s: f64,
-    /// The values (layout of `dsp::feature`).
-    pub values: [f32; FEATURE_DIM],
+    /// The frame, its times and beat grid on the run's stream clock.
+    pub frame: FeatureFrame,
     /// Wall time (ns since the epoch) the block that completed this frame entered the ring.
     pub ingest_wall_ns: u64,
-    /// The beat grid when the frame was made.
-    pub grid: BeatGrid,
 }
 
 /// Frames of silence analysed per step while no audio arrives.
@@ -80,7 +60,6 @@ struct Out<'a> {
     stats: &'a Stats,
     base_time_s: f64,
     ingest_wall_ns: u64,
-    grid: BeatGrid,
 }
 
 impl Out<'_> {
@@ -99,19 +78,6 @@ impl Out<'_> {
 
 impl AnalysisSink for Out<'_> {
     fn hop(&mut self, hop: &HopFrame) {
-        let period = if hop.tempo_bpm > 0.0 {
-            60.0 / hop.tempo_bpm
-        } else {
-            0.0
-        };
-        let bpb = hop.beats_per_bar.max(1) as u32;
-        self.grid = BeatGrid {
-            next_beat_s: self.base_time_s + hop.next_beat_s,
-            period_s: period,
-            next_index_in_bar: (hop.beat_in_bar as u32 % bpb) + 1,
-            beats_per_bar: bpb,
-            locked: hop.locked && period > 0.0,
-        };
         self.stats.tempo_bpm.set(hop.tempo_bpm as f32);
         self.stats.beat_phase.set(hop.beat_phase as f32);
         if hop.index.is_multiple_of(SLOW_EVENT_HOPS) {
@@ -138,21 +104,19 @@ impl AnalysisSink for Out<'_> {
         });
     }
 
-    fn beat(&mut self, beat: &BeatEvent) {
-        self.event(AnalysisEvent::Beat {
-            time_s: self.base_time_s + beat.time_s,
-            index_in_bar: beat.beat_in_bar as u32,
-            beats_per_bar: beat.beats_per_bar as u32,
-            tempo_bpm: beat.tempo_bpm as f32,
-        });
+    fn beat(&mut self, _beat: &BeatEvent) {
+        // Beats go out from the sender, on the grid of the pose it shows (one clock for the
+        // dancer and the beat messages), not when the tracker decides them.
     }
 
     fn feature(&mut self, frame: &FeatureFrame) {
+        let mut frame = *frame;
+        frame.time_s += self.base_time_s;
+        frame.decided_at_s += self.base_time_s;
+        frame.grid = frame.grid.shifted(self.base_time_s);
         let msg = FeatureMsg {
-            time_s: self.base_time_s + frame.time_s,
-            values: frame.values,
+            frame,
             ingest_wall_ns: self.ingest_wall_ns,
-            grid: self.grid,
         };
         // The queue holds seconds of frames: full means the motion thread stalled.
         if self.queues.features.push(msg).is_err() {
@@ -181,7 +145,6 @@ pub fn run(
         stats: &stats,
         base_time_s: 0.0,
         ingest_wall_ns: 0,
-        grid: BeatGrid::default(),
     };
     let silence_after_ns = (settings.silence_after_s * 1e9) as u64;
     let build = |rate: u32, channels: u16| {
@@ -331,7 +294,6 @@ mod tests {
             stats,
             base_time_s: 0.0,
             ingest_wall_ns: 0,
-            grid: BeatGrid::default(),
         }
     }
 

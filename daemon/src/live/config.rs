@@ -97,8 +97,13 @@ impl Default for AudioConfig {
 pub struct OutputConfig {
     /// Frames sent per second.
     pub rate_hz: f64,
-    /// Safety margin before a pose is shown, beyond the declared look-ahead, ms.
+    /// Delivery margin poses are made ahead by (capture blocks, thread hand-offs), ms: it
+    /// lengthens the prediction horizon and adds no delay.
     pub margin_ms: f64,
+    /// How far ahead of the heard music the shown pose is, ms: sends poses early to cancel a
+    /// renderer's or LED wall's display latency (may be negative). Frames' bundle timetags say
+    /// when they should be shown.
+    pub lead_ms: f64,
     /// Run the pipeline threads at real-time priority where the system allows it.
     pub realtime: bool,
     /// Plain OSC targets (host:port).
@@ -113,7 +118,8 @@ impl Default for OutputConfig {
     fn default() -> Self {
         Self {
             rate_hz: 60.0,
-            margin_ms: 8.0,
+            margin_ms: crate::horizon::DEFAULT_MARGIN_S * 1e3,
+            lead_ms: 0.0,
             realtime: true,
             osc: vec!["127.0.0.1:10000".into()],
             vmc: VmcConfig::default(),
@@ -274,6 +280,13 @@ impl Config {
             return Err(bad(
                 "output.margin_ms",
                 format!("= {m}: must be in 0..=1000"),
+            ));
+        }
+        let l = self.output.lead_ms;
+        if !(l.is_finite() && (-1000.0..=1000.0).contains(&l)) {
+            return Err(bad(
+                "output.lead_ms",
+                format!("= {l}: must be in -1000..=1000"),
             ));
         }
         let s = self.audio.speed;

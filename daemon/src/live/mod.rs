@@ -2,6 +2,7 @@
 //! paced sender → [`sink::FrameSink`], with live controls, stats and a status line.
 
 pub mod analysis;
+pub mod beat_clock;
 pub mod capture;
 pub mod config;
 pub mod control_queue;

@@ -1,16 +1,18 @@
-//! The motion thread: one `MotionSource::step` per model frame, as soon as the frame's
-//! look-ahead has been analysed, with the performer's controls applied (key poses quantised to
-//! the beat grid the analysis predicts).
+//! The motion thread: one `MotionSource::step` per analysed feature frame, for the model frame
+//! `horizon` frames past it (the newest frame predicted to that time, `dsp::FeatureFrame::
+//! predicted_at`), so the pose for the music heard now exists before it is shown; with the
+//! performer's controls applied (key poses quantised to the beat grid the analysis predicts).
 
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+use dsp::BeatGrid;
 use dsp::feature::FEATURE_DIM;
 use glam::Quat;
 use model::rig::{JOINT_COUNT, Pose};
 use model::source::{Controls, KeyPoseTarget, MotionSource};
 
-use super::analysis::{BeatGrid, FeatureMsg};
+use super::analysis::FeatureMsg;
 use super::control_queue::{ControlReceiver, MotionCommand};
 use super::pipeline::LiveContext;
 use super::stats::{KEY_POSE_NONE, KEY_POSE_PENDING, KEY_POSE_REACHED};
@@ -71,6 +73,9 @@ pub struct MotionSettings {
     pub transition_beats: f32,
     /// Initial beat accent (None: the source's own).
     pub beat_accent: Option<f32>,
+    /// Model frames past the newest analysed frame each pose is made for (at least the
+    /// source's look-ahead; see `crate::horizon`).
+    pub horizon_frames: usize,
 }
 
 struct KeyPose {
@@ -107,7 +112,10 @@ pub fn run(
 ) {
     let LiveContext { epoch, stats, stop } = ctx;
     let rate = source.frame_rate();
-    let need = source.lookahead_frames() + 1;
+    let look = source.lookahead_frames();
+    let need = look + 1;
+    // The pose for `times[0]` is made once its look-ahead has been predicted too.
+    let ahead_s = settings.horizon_frames.max(look) as f64 / rate;
     let mut window: Vec<[f32; FEATURE_DIM]> = Vec::with_capacity(need);
     let mut times: Vec<f64> = Vec::with_capacity(need);
     let mut pose = Pose::rest();
@@ -145,9 +153,10 @@ pub fn run(
                 continue;
             }
         };
-        grid = msg.grid;
-        window.push(msg.values);
-        times.push(msg.time_s);
+        grid = msg.frame.grid;
+        let predicted_s = msg.frame.time_s + ahead_s;
+        window.push(msg.frame.predicted_at(predicted_s));
+        times.push(predicted_s);
         if window.len() < need {
             continue;
         }
@@ -182,7 +191,15 @@ pub fn run(
                 .key_pose_state
                 .store(KEY_POSE_REACHED, Ordering::Relaxed);
         }
-        if queues.poses.push(TimedPose { time_s: t, pose }).is_err() {
+        if queues
+            .poses
+            .push(TimedPose {
+                time_s: t,
+                pose,
+                grid,
+            })
+            .is_err()
+        {
             stats.poses_dropped.fetch_add(1, Ordering::Relaxed);
         }
         let now_ns = epoch.elapsed().as_nanos() as u64;

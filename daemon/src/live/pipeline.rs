@@ -37,8 +37,12 @@ pub struct PipelineSettings {
     pub rate_hz: f64,
     /// Audio seconds per wall second (1 live; the replay speed otherwise).
     pub speed: f64,
-    /// Safety margin added to the declared look-ahead before a pose is shown, ms.
+    /// Delivery margin the poses are made ahead by (capture blocks, hand-offs), wall ms; it
+    /// lengthens the prediction horizon and adds no delay.
     pub margin_ms: f64,
+    /// How far ahead of the heard music the shown pose is, wall ms (cancels a renderer's
+    /// display latency; may be negative).
+    pub lead_ms: f64,
     /// Initial temperature.
     pub temperature: f32,
     /// Initial transition length for immediate key poses, beats.
@@ -52,12 +56,14 @@ pub struct PipelineSettings {
 }
 
 impl Default for PipelineSettings {
-    /// 60 Hz, real time, 8 ms margin, temperature 0.5, one-beat transitions, real-time threads.
+    /// 60 Hz, real time, 15 ms margin, lead 0, temperature 0.5, one-beat transitions,
+    /// real-time threads.
     fn default() -> Self {
         Self {
             rate_hz: 60.0,
             speed: 1.0,
-            margin_ms: 8.0,
+            margin_ms: crate::horizon::DEFAULT_MARGIN_S * 1e3,
+            lead_ms: 0.0,
             temperature: 0.5,
             transition_beats: 1.0,
             beat_accent: None,
@@ -124,21 +130,7 @@ pub struct Pipeline {
     sender: Option<JoinHandle<Box<dyn FrameSink>>>,
     cpu_start_s: f64,
     started: Instant,
-    declared_lookahead_s: f64,
-}
-
-/// The declared look-ahead of a source at `model_rate` with `lookahead` frames, audio seconds:
-/// look-ahead frames plus one (interpolation), half a short window plus the resampler delay,
-/// and one analysis hop (see `stats`).
-pub fn declared_lookahead_s(model_rate: f64, lookahead: usize, input_rate: u32) -> f64 {
-    let resampler_delay = if input_rate == dsp::ANALYSIS_RATE {
-        0.0
-    } else {
-        0.006
-    };
-    (lookahead as f64 + 1.0) / model_rate
-        + (dsp::SHORT_WINDOW / 2 + dsp::HOP) as f64 / f64::from(dsp::ANALYSIS_RATE)
-        + resampler_delay
+    horizon_frames: usize,
 }
 
 impl Pipeline {
@@ -158,8 +150,19 @@ impl Pipeline {
         if !(settings.speed.is_finite() && settings.speed > 0.0) {
             return Err(anyhow!("speed {} must be positive", settings.speed));
         }
+        if !(settings.lead_ms.is_finite() && settings.lead_ms.abs() <= 1000.0) {
+            return Err(anyhow!(
+                "lead {} ms is not in -1000..=1000",
+                settings.lead_ms
+            ));
+        }
         let model_rate = parts.source.frame_rate();
-        let declared = declared_lookahead_s(model_rate, parts.source.lookahead_frames(), 0);
+        // Audio seconds: the lead and the margin are wall times.
+        let horizon = crate::horizon::source_horizon(
+            &*parts.source,
+            settings.lead_ms * 1e-3 * settings.speed,
+            settings.margin_ms * 1e-3 * settings.speed,
+        );
         // Wait-free SPSC queues, deep enough that only a stalled thread can fill one (counted).
         let (features_tx, features_rx) = rtrb::RingBuffer::new(FEATURE_QUEUE);
         let (events_tx, events_rx) = rtrb::RingBuffer::new(EVENT_QUEUE);
@@ -183,6 +186,7 @@ impl Pipeline {
                 temperature: settings.temperature,
                 transition_beats: settings.transition_beats,
                 beat_accent: settings.beat_accent,
+                horizon_frames: horizon,
             };
             let (receiver, table) = controls.into_receiver();
             let queues = MotionQueues {
@@ -224,8 +228,7 @@ impl Pipeline {
             let ctx = ctx.clone();
             let s = SchedulerSettings {
                 rate_hz: settings.rate_hz,
-                declared_lookahead_s: declared,
-                margin_s: settings.margin_ms * 1e-3,
+                lead_s: settings.lead_ms * 1e-3,
                 speed: settings.speed,
             };
             let queues = SenderQueues {
@@ -248,13 +251,13 @@ impl Pipeline {
             sender: Some(sender),
             cpu_start_s: process_cpu_s(),
             started: Instant::now(),
-            declared_lookahead_s: declared,
+            horizon_frames: horizon,
         })
     }
 
-    /// The declared look-ahead this run pays, audio seconds.
-    pub fn declared_lookahead_s(&self) -> f64 {
-        self.declared_lookahead_s
+    /// Model frames past the newest analysed frame each pose is made for (`crate::horizon`).
+    pub fn horizon_frames(&self) -> usize {
+        self.horizon_frames
     }
 
     /// Whether any thread has ended on its own (an error), which stops the run.

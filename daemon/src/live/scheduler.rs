@@ -1,7 +1,8 @@
 //! The sender thread: on a fixed grid (default 60 Hz) of a monotonic clock, it picks the audio
-//! time to show (the audio clock delayed by the declared look-ahead plus a safety margin),
-//! interpolates the poses around it, builds a [`BodyFrame`] in Unity coordinates and hands it,
-//! and any pending analysis events, to the sink.
+//! time to show — the music heard now, plus the output lead (which cancels a renderer's display
+//! latency) — interpolates the poses around it (made ahead of time from predicted music),
+//! builds a [`BodyFrame`] in Unity coordinates stamped with when it should be shown, and hands
+//! it to the sink with the beats it crossed ([`BeatClock`]) and any pending analysis events.
 
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant, SystemTime};
@@ -9,6 +10,7 @@ use std::time::{Duration, Instant, SystemTime};
 use glam::{Quat, Vec3};
 use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton, to_unity_position, to_unity_rotation};
 
+use super::beat_clock::BeatClock;
 use super::pipeline::LiveContext;
 use super::sink::FrameSink;
 use super::timeline::{Anchor, TimedPose, Timeline};
@@ -25,10 +27,8 @@ const MAX_EXTRAPOLATION_S: f64 = 0.1;
 pub struct SchedulerSettings {
     /// Frames sent per second.
     pub rate_hz: f64,
-    /// Declared look-ahead, audio seconds (see `stats`).
-    pub declared_lookahead_s: f64,
-    /// Safety margin on top of it, wall seconds.
-    pub margin_s: f64,
+    /// How far ahead of the heard music the shown pose is, wall seconds (may be negative).
+    pub lead_s: f64,
     /// Audio seconds per wall second.
     pub speed: f64,
 }
@@ -65,14 +65,21 @@ impl FrameBuilder {
         }
     }
 
-    /// The frame for `pose`, stamped with `audio_time_s` and the current wall-clock time.
-    pub fn build(&mut self, index: u64, audio_time_s: f64, pose: &Pose) -> &BodyFrame {
+    /// The frame for `pose`, stamped with `audio_time_s` and the wall-clock time `lead_s` from
+    /// now (when it should be shown).
+    pub fn build(&mut self, index: u64, audio_time_s: f64, pose: &Pose, lead_s: f64) -> &BodyFrame {
         self.skeleton
             .forward_kinematics(pose, &mut self.positions, &mut self.rotations);
         let f = &mut self.frame;
         f.frame_index = index;
         f.audio_time_s = audio_time_s;
-        f.timetag = SystemTime::now();
+        let now = SystemTime::now();
+        let lead = Duration::from_secs_f64(lead_s.abs().min(10.0));
+        f.timetag = if lead_s >= 0.0 {
+            now + lead
+        } else {
+            now.checked_sub(lead).unwrap_or(now)
+        };
         f.root_position = to_unity_position(pose.root_position);
         f.root_rotation = to_unity_rotation(self.rotations[0]);
         f.bones.clear();
@@ -139,17 +146,21 @@ pub fn run(
         libc::prctl(libc::PR_SET_TIMERSLACK, 50_000 as libc::c_ulong);
     }
     let period = Duration::from_secs_f64(1.0 / settings.rate_hz);
-    let delay_ns =
-        ((settings.declared_lookahead_s / settings.speed + settings.margin_s) * 1e9) as u64;
-    let declared_wall_s = settings.declared_lookahead_s / settings.speed;
+    let lead_s = if settings.lead_s.is_finite() {
+        settings.lead_s
+    } else {
+        0.0
+    };
+    let lead_audio_s = lead_s * settings.speed;
     // The clock and the pose history are this thread's own: the other threads only queue.
     let mut timeline = Timeline::new(settings.speed);
     let mut builder = FrameBuilder::new();
+    let mut beats = BeatClock::default();
     let mut pose = Pose::rest();
     let mut index = 0u64;
     let mut last_t = f64::NEG_INFINITY;
     let mut last_sent: Option<Instant> = None;
-    sink.prepare(builder.build(0, 0.0, &pose));
+    sink.prepare(builder.build(0, 0.0, &pose, 0.0));
     let mut deadline = Instant::now() + period;
     let _counting = CountGuard::new(RtThread::Sender);
     while !stop.load(Ordering::Relaxed) {
@@ -164,7 +175,9 @@ pub fn run(
         let now_ns = woke.duration_since(epoch).as_nanos() as u64;
         let picked = (|| {
             let tl = &timeline;
-            let mut t = tl.audio_time_at(now_ns.saturating_sub(delay_ns), MAX_EXTRAPOLATION_S)?;
+            // The music heard now, and the lead on top.
+            let heard = tl.audio_time_at(now_ns, MAX_EXTRAPOLATION_S)?;
+            let mut t = heard + lead_audio_s;
             if t <= last_t {
                 // The clock stalls when audio stops; frames still need increasing times.
                 t = last_t + 1e-6;
@@ -173,12 +186,13 @@ pub fn run(
             blend(&a.pose, &b.pose, w, &mut pose);
             let shown = if late { b.time_s } else { t };
             let ingest = tl.ingest_wall_ns(shown)?;
-            Some((t, late, ingest))
+            Some((t, late, ingest, b.grid))
         })();
-        if let Some((t, late, ingest_ns)) = picked {
-            last_t = t;
-            let frame = builder.build(index, t, &pose);
+        if let Some((t, late, ingest_ns, grid)) = picked {
+            let frame = builder.build(index, t, &pose, lead_s);
             sink.send_frame(frame);
+            beats.advance(&grid, last_t, t, settings.speed, |e| sink.send_event(&e));
+            last_t = t;
             // Stamped when the last send_to has returned: what a receiver can see.
             let sent = Instant::now();
             let done_ns = sent.duration_since(epoch).as_nanos() as u64;
@@ -187,7 +201,9 @@ pub fn run(
             if late {
                 stats.late_frames.fetch_add(1, Ordering::Relaxed);
             }
-            let latency = (done_ns as f64 - ingest_ns as f64) * 1e-9 - declared_wall_s;
+            // How much later than intended it left: a frame showing audio heard at `ingest`
+            // is due `lead` before it.
+            let latency = (done_ns as f64 - ingest_ns as f64) * 1e-9 + lead_s;
             stats.latency.record_s(latency);
             stats
                 .tick_to_sent

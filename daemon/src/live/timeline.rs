@@ -86,6 +86,8 @@ pub struct TimedPose {
     pub time_s: f64,
     /// The pose.
     pub pose: Pose,
+    /// The beat grid its music was predicted with (the sender's beat messages follow it).
+    pub grid: dsp::BeatGrid,
 }
 
 /// The sender's clock and pose history.

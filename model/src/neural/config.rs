@@ -68,7 +68,8 @@ pub struct NetConfig {
 }
 
 impl Default for NetConfig {
-    /// The shipped size: 3 × 128-wide blocks over a 2.56 s window, 0.16 s look-ahead, 8 flow steps.
+    /// The shipped size: 3 × 128-wide blocks over a 2.56 s window, no look-ahead (the music
+    /// is predicted to each frame's time instead, see `dsp::predicted_stream`), 8 flow steps.
     fn default() -> Self {
         NetConfig {
             d_model: 128,
@@ -76,7 +77,7 @@ impl Default for NetConfig {
             layers: 3,
             ff: 256,
             window: 64,
-            lookahead: 4,
+            lookahead: 0,
             flow_steps: 8,
             flow_hidden: 192,
         }

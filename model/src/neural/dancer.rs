@@ -98,6 +98,7 @@ pub struct NeuralDancer {
     previous_raw: [f32; MOTION_FEATURE_DIM],
     mean_speed_mps: f32,
     speed_limited: u64,
+    horizon_frames: usize,
 }
 
 impl NeuralDancer {
@@ -131,6 +132,7 @@ impl NeuralDancer {
         norm.pose(&l, &mut low);
         norm.pose(&h, &mut high);
         let mut d = NeuralDancer {
+            horizon_frames: model.training.horizon_frames,
             runtime,
             norm,
             low,
@@ -287,6 +289,10 @@ impl MotionSource for NeuralDancer {
 
     fn lookahead_frames(&self) -> usize {
         self.runtime.config().lookahead
+    }
+
+    fn horizon_frames(&self) -> usize {
+        self.horizon_frames
     }
 
     fn step(&mut self, music: &[[f32; FEATURE_DIM]], controls: &Controls, out: &mut Pose) {

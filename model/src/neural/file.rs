@@ -82,6 +82,10 @@ pub struct TrainingSummary {
     /// (and of the runs it resumed).
     #[serde(default)]
     pub recipe: String,
+    /// Frames ahead of the analysis the training music was predicted by (`dsp::predicted_stream`;
+    /// 0 for models trained on the analysed frames themselves, before predicted features).
+    #[serde(default)]
+    pub horizon_frames: usize,
 }
 
 /// The metadata block.

@@ -191,6 +191,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     model.training.dances = corpus.dances();
     model.training.frames = corpus.frames();
     model.training.seed = args.seed;
+    model.training.horizon_frames = daemon::horizon::data_horizon(model::tang2018::TANG_FPS);
     model.training.data = format!(
         "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig: {}",
         daemon::dataset::DATASET_VERSION,
