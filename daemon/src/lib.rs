@@ -14,6 +14,7 @@ pub mod horizon;
 pub mod key_cue;
 pub mod live;
 pub mod live_cli;
+pub mod motion_lag;
 pub mod offline;
 pub mod output;
 pub mod plot;

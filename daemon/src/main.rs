@@ -7,6 +7,7 @@ use tracing_subscriber::EnvFilter;
 
 use daemon::command::analyze::{AnalyzeArgs, analyze};
 use daemon::command::bench_beats::{BenchBeatsArgs, bench_beats};
+use daemon::command::bench_lag::{BenchLagArgs, bench_lag};
 use daemon::command::bench_live::{BenchLiveArgs, bench_live};
 use daemon::command::bench_model::{BenchModelArgs, bench_model};
 use daemon::command::bvh_export::{BvhArgs, bvh_export};
@@ -82,6 +83,8 @@ enum BenchCommand {
     Beats(BenchBeatsArgs),
     /// The live pipeline at 1× on a replayed file: latency, jitter, CPU, memory, drops.
     Live(BenchLiveArgs),
+    /// How far the dancer a receiver sees trails the heard music, measured over UDP.
+    Lag(BenchLagArgs),
     /// Per-frame sampling time of the neural dancer on one thread (p50, p99).
     Model(BenchModelArgs),
 }
@@ -101,6 +104,7 @@ fn main() -> Result<()> {
         Command::Bench { what } => match what {
             BenchCommand::Beats(args) => bench_beats(args),
             BenchCommand::Live(args) => bench_live(args),
+            BenchCommand::Lag(args) => bench_lag(args),
             BenchCommand::Model(args) => bench_model(&args),
         },
         Command::Generate(args) => generate(&args),

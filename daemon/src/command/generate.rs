@@ -162,21 +162,18 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     // `horizon` frames earlier.
     let horizon = crate::horizon::offline_horizon(&*dancer);
     let music = dsp::predicted_stream(&a.features, horizon);
-    let look = dancer.lookahead_frames();
-    let mut pose = model::rig::Pose::rest();
-    let mut poses = Vec::with_capacity(music.len().min(limit));
     let step_start = Instant::now();
-    for i in 0..music.len().min(limit) {
-        let controls = Controls {
+    let poses = crate::motion_lag::dance_stream(
+        &mut *dancer,
+        &music,
+        horizon,
+        music.len().min(limit),
+        |i| Controls {
             temperature,
             key_pose: crate::key_cue::target_at(&cues, i, lead_frames),
             beat_accent: None,
-        };
-        // The frame and its look-ahead (shorter at the end).
-        let window = &music[i..(i + look + 1).min(music.len())];
-        dancer.step(window, &controls, &mut pose);
-        poses.push(pose);
-    }
+        },
+    );
     let step_s = step_start.elapsed().as_secs_f64();
     for c in &cues {
         match poses.get(c.frame) {

@@ -97,6 +97,12 @@ pub fn spawn(
                 .duration_s
                 .map(|d| (d * f64::from(audio.sample_rate)) as u64);
             let mut start = Instant::now();
+            // The replay clock, for measurements against what a listener would hear.
+            let publish = |start: Instant| {
+                let ns = start.saturating_duration_since(ctx.epoch).as_nanos() as u64;
+                ctx.stats.replay_origin_ns.store(ns, Ordering::Relaxed);
+            };
+            publish(start);
             let mut k = 0u64;
             let mut pos = 0usize;
             let mut replayed = 0u64;
@@ -117,6 +123,8 @@ pub fn spawn(
                 } else if now - deadline > Duration::from_millis(200) {
                     // Stalled (machine busy): carry on from now instead of bursting.
                     start = now - Duration::from_secs_f64(block_s * (k + 1) as f64);
+                    publish(start);
+                    ctx.stats.replay_rebases.fetch_add(1, Ordering::Relaxed);
                 }
                 in_callback(|| writer.write(block, audio.sample_rate, audio.channels));
                 pos = end;

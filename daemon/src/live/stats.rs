@@ -200,6 +200,11 @@ pub struct Stats {
     pub late_frames: AtomicU64,
     /// Times the sender fell more than a tick behind and skipped ticks to rejoin its grid.
     pub sender_stalls: AtomicU64,
+    /// The replay's clock: the wall time (ns since the epoch) at which its audio time 0 is
+    /// heard; audio time `a` is heard at `origin + a / speed` (u64::MAX before a replay runs).
+    pub replay_origin_ns: AtomicU64,
+    /// Times the replay fell behind by more than 200 ms and restarted its clock from then.
+    pub replay_rebases: AtomicU64,
     /// Packets the sink reports.
     pub packets_sent: AtomicU64,
     /// Model frames stepped.
@@ -264,6 +269,8 @@ impl Stats {
             frames_sent: AtomicU64::new(0),
             late_frames: AtomicU64::new(0),
             sender_stalls: AtomicU64::new(0),
+            replay_origin_ns: AtomicU64::new(u64::MAX),
+            replay_rebases: AtomicU64::new(0),
             packets_sent: AtomicU64::new(0),
             model_frames: AtomicU64::new(0),
             silence_frames: AtomicU64::new(0),
