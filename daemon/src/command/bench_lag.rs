@@ -22,7 +22,8 @@ pub struct BenchLagArgs {
     /// Audio files to measure instead of the data set's songs.
     #[arg(long)]
     pub input: Vec<PathBuf>,
-    /// Songs taken from the data set (constant tempo, spread over the tempo range).
+    /// Songs taken from the data set (constant tempo, spread over the tempo range; 0: only the
+    /// tempo jumps).
     #[arg(long, default_value_t = 5)]
     pub songs: usize,
     /// Seconds of each song replayed.
@@ -42,6 +43,9 @@ pub struct BenchLagArgs {
     /// Dancers to measure (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "neural,retrieval")]
     pub sources: Vec<String>,
+    /// Tempo jumps measured: pairs of the data set's songs joined on a beat.
+    #[arg(long, default_value_t = 4)]
+    pub jumps: usize,
     #[command(flatten)]
     pub dancer: SourceArgs,
 }
@@ -79,20 +83,7 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
             audio: ReplayAudio::demo(args.seconds + 1.0),
         }]);
     }
-    // Constant-tempo songs, spread evenly over their tempo range.
-    let mut steady: Vec<(f64, &crate::bench::BenchItem)> = set
-        .items
-        .iter()
-        .filter_map(|i| {
-            let json = std::fs::read_to_string(i.audio.with_extension("json")).ok()?;
-            let v: serde_json::Value = serde_json::from_str(&json).ok()?;
-            let constant = v["tempo_curve"].as_str() == Some("constant")
-                && v["drumless_intro_bars"].as_u64().unwrap_or(0) == 0;
-            let bpm = v["tempo_start_bpm"].as_f64()?;
-            (constant && (70.0..=170.0).contains(&bpm)).then_some((bpm, i))
-        })
-        .collect();
-    steady.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let steady = steady_songs(&set);
     let n = args.songs.max(1).min(steady.len());
     let picked: Vec<_> = (0..n)
         .map(|k| steady[k * (steady.len() - 1) / (n - 1).max(1)])
@@ -109,11 +100,219 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
         .collect()
 }
 
+/// What a song's JSON says of it.
+struct SongInfo {
+    bpm: f64,
+    constant: bool,
+    intro: bool,
+    /// The quiet section, seconds, if any.
+    quiet: Option<(f64, f64)>,
+    /// Where the tempo jumps, for songs that have a jump.
+    tempo_change_s: Option<f64>,
+}
+
+fn song_info(item: &crate::bench::BenchItem) -> Option<SongInfo> {
+    let json = std::fs::read_to_string(item.audio.with_extension("json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&json).ok()?;
+    let q = &v["quiet_section"];
+    Some(SongInfo {
+        bpm: v["tempo_start_bpm"].as_f64()?,
+        constant: v["tempo_curve"].as_str() == Some("constant"),
+        intro: v["drumless_intro_bars"].as_u64().unwrap_or(0) > 0,
+        quiet: q["start_s"].as_f64().zip(q["end_s"].as_f64()),
+        tempo_change_s: v["tempo_change_s"].as_f64(),
+    })
+}
+
+/// The set's constant-tempo songs without a drumless intro, 70–170 BPM, slowest first.
+fn steady_songs(set: &crate::bench::BenchSet) -> Vec<(f64, &crate::bench::BenchItem)> {
+    let mut steady: Vec<(f64, &crate::bench::BenchItem)> = set
+        .items
+        .iter()
+        .filter_map(|i| {
+            let info = song_info(i)?;
+            (info.constant && !info.intro && (70.0..=170.0).contains(&info.bpm))
+                .then_some((info.bpm, i))
+        })
+        .collect();
+    steady.sort_by(|a, b| a.0.total_cmp(&b.0));
+    steady
+}
+
+/// Seconds into the first song the second one cuts in, and into the second where it resumes.
+const CUT_NEAR_S: f64 = 16.0;
+const RESUME_NEAR_S: f64 = 8.0;
+/// A dancer's beat within this of the heard beat counts as back on it, seconds.
+const ON_BEAT_S: f64 = 0.02;
+
+/// The tempo-jump table: songs of contrasting tempo joined on a beat, each dancer offline
+/// (the live path hears exactly the same, see the lag table).
+fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
+    use crate::beat_recovery::{dancer_beat_errors, largest_step_m, recovery_s};
+    let set = crate::bench::synth_set(&args.data);
+    let mut cases: Vec<(String, crate::beat_recovery::Splice)> = Vec::new();
+    // Songs rendered with a tempo jump of their own.
+    for item in &set.items {
+        let (Some(info), Ok(a)) = (song_info(item), ReplayAudio::from_file(&item.audio)) else {
+            continue;
+        };
+        if let Some(cut_s) = info.tempo_change_s {
+            let end_bpm = 60.0
+                / item
+                    .beats
+                    .windows(2)
+                    .last()
+                    .map_or(f64::NAN, |w| w[1] - w[0]);
+            cases.push((
+                format!("{:.0} → {end_bpm:.0} BPM (in {})", info.bpm, item.name),
+                crate::beat_recovery::Splice {
+                    samples: a
+                        .samples
+                        .chunks_exact(usize::from(a.channels.max(1)))
+                        .map(|f| f.iter().sum::<f32>() / f.len() as f32)
+                        .collect(),
+                    sample_rate: a.sample_rate,
+                    beats: item.beats.clone(),
+                    cut_s,
+                },
+            ));
+        }
+    }
+    // Pairs of songs joined on a beat: the same sample rate, tempos a fifth or more apart, no
+    // quiet section where it is measured (a break is another test).
+    let decoded: Vec<(f64, String, ReplayAudio, Vec<f64>, Option<(f64, f64)>)> = set
+        .items
+        .iter()
+        .filter_map(|i| {
+            let info = song_info(i)?;
+            if !info.constant || !(70.0..=170.0).contains(&info.bpm) {
+                return None;
+            }
+            let a = ReplayAudio::from_file(&i.audio).ok()?;
+            Some((info.bpm, i.name.clone(), a, i.beats.clone(), info.quiet))
+        })
+        .collect();
+    let clear_before = |q: Option<(f64, f64)>| q.is_none_or(|(s, _)| s >= CUT_NEAR_S + 1.0);
+    let clear_after = |q: Option<(f64, f64)>| q.is_none_or(|(_, e)| e <= RESUME_NEAR_S - 1.0);
+    let mut joined = 0;
+    for (x, a) in decoded.iter().enumerate() {
+        for b in decoded.iter().skip(x + 1) {
+            // Alternate slower → faster and faster → slower.
+            let (a, b) = if joined % 2 == 0 { (a, b) } else { (b, a) };
+            let ratio = a.0.max(b.0) / a.0.min(b.0);
+            if joined >= args.jumps
+                || a.2.sample_rate != b.2.sample_rate
+                || ratio < 1.2
+                || !clear_before(a.4)
+                || !clear_after(b.4)
+            {
+                continue;
+            }
+            let Some(s) = crate::beat_recovery::splice(
+                (&a.2.samples, a.2.channels, &a.3),
+                (&b.2.samples, b.2.channels, &b.3),
+                a.2.sample_rate,
+                CUT_NEAR_S,
+                RESUME_NEAR_S,
+            ) else {
+                continue;
+            };
+            cases.push((
+                format!("{:.0} → {:.0} BPM ({} → {})", a.0, b.0, a.1, b.1),
+                s,
+            ));
+            joined += 1;
+            break;
+        }
+    }
+    if cases.is_empty() {
+        eprintln!("no songs for the tempo-jump table");
+        return Ok(());
+    }
+    println!();
+    println!(
+        "| tempo jump | dancer | beat back within {:.0} ms after | beats on time from 8 s after | tempo heard at the end | largest joint step, 4 s after / elsewhere |",
+        ON_BEAT_S * 1e3
+    );
+    println!("| --- | --- | --- | --- | --- | --- |");
+    for (title, s) in &cases {
+        let rate = s.sample_rate;
+        let fa = analyze_samples(
+            "tempo jump",
+            &s.samples,
+            rate,
+            1,
+            AnalyzeOptions::native(Some(model::retrieval::RETRIEVAL_FPS)),
+        )?;
+        for name in &args.sources {
+            let kind = SourceKind::parse(name).with_context(|| format!("unknown dancer {name}"))?;
+            let mut source = open_source(kind, &source_settings(kind, config), config.dancer.seed)?;
+            let fps = source.frame_rate();
+            let horizon = crate::horizon::offline_horizon(&*source);
+            let errors = dancer_beat_errors(&fa.features, horizon, fps, &s.beats);
+            let back = recovery_s(&errors, s.cut_s, ON_BEAT_S);
+            // How the rest of the song goes: beats on time from 8 s after the jump.
+            let late: Vec<Option<f64>> = errors
+                .iter()
+                .filter(|(t, _)| *t >= s.cut_s + 8.0)
+                .map(|(_, e)| *e)
+                .collect();
+            let on_time = late
+                .iter()
+                .filter(|e| e.is_some_and(|e| e.abs() <= ON_BEAT_S))
+                .count() as f64
+                / late.len().max(1) as f64;
+            let end_tempo = fa.features.last().map_or(0.0, |f| f.grid.tempo_bpm());
+            let music = dsp::predicted_stream(&fa.features, horizon);
+            let poses = dance_stream(&mut *source, &music, horizon, music.len(), |_| {
+                model::source::Controls {
+                    temperature: config.dancer.temperature,
+                    ..Default::default()
+                }
+            });
+            let end = poses.len() as f64 / fps;
+            let near = largest_step_m(&poses, fps, s.cut_s, s.cut_s + 4.0);
+            let before = largest_step_m(&poses, fps, 4.0, s.cut_s);
+            let after = largest_step_m(&poses, fps, s.cut_s + 4.0, end);
+            println!(
+                "| {title} | {} | {} | {:.0} % | {end_tempo:.0} BPM | {:.1} cm / {:.1} cm |",
+                kind.name(),
+                back.map_or("not within the song".into(), |t| format!("{t:.1} s")),
+                on_time * 100.0,
+                near * 100.0,
+                before.max(after) * 100.0
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The dancer's settings from the command line's configuration.
+fn source_settings(kind: SourceKind, config: &Config) -> SourceSettings<'_> {
+    SourceSettings {
+        model: if kind == SourceKind::Neural {
+            config.dancer.model.as_deref()
+        } else {
+            None
+        },
+        library: if kind == SourceKind::Retrieval {
+            config.dancer.library.as_deref()
+        } else {
+            None
+        },
+        beat_accent: Some(config.dancer.beat_accent),
+    }
+}
+
 /// Runs `danced bench lag`.
 pub fn bench_lag(args: BenchLagArgs) -> Result<()> {
     let mut config = Config::default();
     args.dancer.apply(&mut config);
-    let songs = songs(&args)?;
+    let songs = if args.songs == 0 && args.input.is_empty() {
+        Vec::new()
+    } else {
+        songs(&args)?
+    };
     println!("| song | BPM | dancer | lead ms | lag ms | correlation | frames | late frames |");
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     for song in &songs {
@@ -127,19 +326,7 @@ pub fn bench_lag(args: BenchLagArgs) -> Result<()> {
         .with_context(|| format!("analysing {}", song.name))?;
         for name in &args.sources {
             let kind = SourceKind::parse(name).with_context(|| format!("unknown dancer {name}"))?;
-            let settings = SourceSettings {
-                model: if kind == SourceKind::Neural {
-                    config.dancer.model.as_deref()
-                } else {
-                    None
-                },
-                library: if kind == SourceKind::Retrieval {
-                    config.dancer.library.as_deref()
-                } else {
-                    None
-                },
-                beat_accent: Some(config.dancer.beat_accent),
-            };
+            let settings = source_settings(kind, &config);
             for &lead_ms in &args.lead_ms {
                 let seed = config.dancer.seed;
                 // The reference: the same song danced offline at the horizon the run uses.
@@ -185,5 +372,5 @@ pub fn bench_lag(args: BenchLagArgs) -> Result<()> {
             }
         }
     }
-    Ok(())
+    tempo_jumps(&args, &config)
 }
