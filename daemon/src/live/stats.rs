@@ -2,20 +2,17 @@
 //!
 //! Definitions (all wall times on one monotonic clock, [`std::time::Instant`]):
 //!
-//! - **declared look-ahead** `D` (audio seconds): what the design itself must wait before a pose
-//!   for audio time `t` can exist: the motion source's look-ahead (`lookahead_frames / rate`),
-//!   one model frame (the scheduler interpolates between the two poses around `t`, so the later
-//!   one must exist), the analysis's short-window latency (half a 1024-sample window plus the
-//!   resampler delay) and one analysis hop (features are computed once per 11.6 ms hop).
-//! - **added latency** of a sent frame: `send_wall − ingest_wall(t_shown) − D / speed`, where
-//!   `t_shown` is the audio time the frame actually depicts (the scheduled time, or the newest
+//! - **shown time** of a sent frame: the audio time heard at the send (`heard(now)`, from the
+//!   audio clock) plus the output lead. Poses are made ahead of it from predicted music
+//!   (`crate::horizon`), so nothing is waited for.
+//! - **added latency** of a sent frame: `send_wall − (ingest_wall(t_shown) − lead)`, where
+//!   `t_shown` is the audio time the frame actually depicts (the shown time, or the newest
 //!   pose's time when the motion was late and the pose was held) and `ingest_wall(t)` is the
-//!   wall time the block holding the sample at `t` entered the audio ring. It is what the
-//!   pipeline costs beyond the model's own look-ahead: the scheduler's safety margin, thread
-//!   wake-ups, the 60 Hz tick, and any lateness of analysis or motion.
+//!   wall time the block holding the sample at `t` entered the audio ring: how much later than
+//!   intended the frame left — the tick, the send, and any lateness of analysis or motion.
 //! - **processing latency** of a model frame: `pose_ready_wall − ingest_wall(S)`, where `S` is
 //!   the block that completed the newest feature frame the pose needed: how long analysis and
-//!   motion actually took (what the safety margin must cover).
+//!   motion actually took (what the delivery margin, `output.margin_ms`, must cover).
 //! - **tick to sent** of a frame: `sent_wall − scheduled_wall`, where `sent_wall` is when the
 //!   frame's last `send_to` returned and `scheduled_wall` its tick on the sender's fixed grid:
 //!   the wake-up, the pose pick, forward kinematics, encoding and the system calls.

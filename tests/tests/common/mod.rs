@@ -13,7 +13,8 @@ pub fn frames_differing(x: &[Pose], y: &[Pose], dot: f32) -> usize {
         .count()
 }
 
-/// The demo song's streaming feature frames at `fps` and its beats, `seconds` long.
+/// The demo song's streaming feature frames at `fps`, as a dancer hears them live at lead 0
+/// (predicted over the data horizon), and its beats, `seconds` long.
 #[allow(dead_code)]
 pub fn demo_music(seconds: f64, fps: f64) -> (Vec<[f32; dsp::feature::FEATURE_DIM]>, Vec<f64>) {
     let song = daemon::demo_track::demo_track(seconds);
@@ -25,7 +26,8 @@ pub fn demo_music(seconds: f64, fps: f64) -> (Vec<[f32; dsp::feature::FEATURE_DI
         daemon::offline::AnalyzeOptions::native(Some(fps)),
     )
     .expect("the demo song analyses");
-    (a.features.iter().map(|f| f.values).collect(), song.beats)
+    let horizon = daemon::horizon::data_horizon(fps);
+    (dsp::predicted_stream(&a.features, horizon), song.beats)
 }
 
 /// Dances `seconds` of the demo song with `source` (reset with `seed`) at `temperature`, each
