@@ -194,11 +194,29 @@ pub fn decode_shape(datagram: &[u8]) -> Option<BodyShape> {
     Some(joints.into_iter().map(|p| p - hips).collect())
 }
 
+/// The stream time of a `/danced/beat` message, if `datagram` is one.
+pub fn decode_beat(datagram: &[u8]) -> Option<f64> {
+    let (_, packet) = rosc::decoder::decode_udp(datagram).ok()?;
+    let rosc::OscPacket::Message(m) = packet else {
+        return None;
+    };
+    if !m.addr.ends_with("/beat") {
+        return None;
+    }
+    match m.args.get(3) {
+        Some(rosc::OscType::Float(t)) => Some(f64::from(*t)),
+        _ => None,
+    }
+}
+
 /// One live measurement: the dancer's lag behind the heard music over a real-time replay.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct LiveLag {
     /// The alignment found.
     pub estimate: LagEstimate,
+    /// For every `/danced/beat` received after the settling time: how long after the dancer
+    /// showed that beat it arrived (heard time at arrival + lead − the beat's time), seconds.
+    pub beat_message_delays_s: Vec<f64>,
     /// Frames the sender had to hold (motion late).
     pub late_frames: u64,
     /// Times the replay fell behind and restarted its clock (the heard axis is then unsure).
@@ -264,6 +282,7 @@ pub fn measure_live_lag(
     )?;
     let epoch = ctx.epoch;
     let mut got: Vec<(Instant, BodyShape)> = Vec::with_capacity((run.seconds * 70.0) as usize);
+    let mut beats: Vec<(Instant, f64)> = Vec::new();
     let mut buf = vec![0u8; 65_536];
     let limit = Instant::now() + Duration::from_secs_f64(run.seconds + 30.0);
     while !ctx.stopped() && !pipeline.failed() && Instant::now() < limit {
@@ -271,6 +290,8 @@ pub fn measure_live_lag(
             let at = Instant::now();
             if let Some(shape) = decode_shape(&buf[..n]) {
                 got.push((at, shape));
+            } else if let Some(t) = decode_beat(&buf[..n]) {
+                beats.push((at, t));
             }
         }
     }
@@ -283,18 +304,23 @@ pub fn measure_live_lag(
     if origin_ns == u64::MAX {
         bail!("the replay never started");
     }
+    let heard =
+        |at: Instant| (at.duration_since(epoch).as_nanos() as f64 - origin_ns as f64) * 1e-9;
     let received: Vec<(f64, BodyShape)> = got
         .into_iter()
-        .map(|(at, s)| {
-            let heard = (at.duration_since(epoch).as_nanos() as f64 - origin_ns as f64) * 1e-9;
-            (heard, s)
-        })
+        .map(|(at, s)| (heard(at), s))
         .filter(|(h, _)| *h >= run.settle_s)
+        .collect();
+    let beat_message_delays_s = beats
+        .into_iter()
+        .filter(|(_, t)| *t >= run.settle_s)
+        .map(|(at, t)| heard(at) + run.lead_ms * 1e-3 - t)
         .collect();
     let estimate = estimate_lag(&received, reference, reference_rate, 0.5)
         .context("too few frames received to align")?;
     Ok(LiveLag {
         estimate,
+        beat_message_delays_s,
         late_frames: report.late_frames,
         replay_rebases: rebases,
     })

@@ -69,6 +69,17 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
         "{} frames",
         e.frames
     );
+    // One clock: each beat message arrives within a 60 Hz tick (and a loaded machine's slack)
+    // of the dancer showing that beat.
+    let delays = &live.beat_message_delays_s;
+    assert!(delays.len() >= 8, "{} beat messages", delays.len());
+    for d in delays {
+        assert!(
+            (-0.001..=0.020 + 0.02).contains(d),
+            "beat message {:.1} ms after the dancer's beat",
+            d * 1e3
+        );
+    }
     e.lag_s * 1e3
 }
 

@@ -313,8 +313,10 @@ pub fn bench_lag(args: BenchLagArgs) -> Result<()> {
     } else {
         songs(&args)?
     };
-    println!("| song | BPM | dancer | lead ms | lag ms | correlation | frames | late frames |");
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| song | BPM | dancer | lead ms | lag ms | correlation | frames | late frames | /danced/beat after the dancer's beat, median / max ms |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for song in &songs {
         let a = analyze_samples(
             &song.name,
@@ -354,8 +356,14 @@ pub fn bench_lag(args: BenchLagArgs) -> Result<()> {
                     measure_live_lag(&run, open_source(kind, &settings, seed)?, &reference, rate)
                         .with_context(|| format!("{} with the {name} dancer", song.name))?;
                 let e = live.estimate;
+                let mut d = live.beat_message_delays_s.clone();
+                d.sort_by(f64::total_cmp);
+                let beat_delay = match (d.get(d.len() / 2), d.last()) {
+                    (Some(m), Some(x)) => format!("{:.1} / {:.1}", m * 1e3, x * 1e3),
+                    _ => "no beats".into(),
+                };
                 println!(
-                    "| {} | {} | {} | {lead_ms:.0} | {:+.1} | {:.3} | {} | {}{} |",
+                    "| {} | {} | {} | {lead_ms:.0} | {:+.1} | {:.3} | {} | {}{} | {beat_delay} |",
                     song.name,
                     song.bpm.map_or("?".into(), |b| format!("{b:.0}")),
                     kind.name(),
