@@ -204,7 +204,7 @@ pub fn summary(r: &StatsReport) -> String {
     let mb = |b: u64| b as f64 / 1_048_576.0;
     let a = &r.allocations;
     format!(
-        "ran          {:.1} s, {} frames sent ({:.1} Hz), {} model frames, {} late, {} sender stalls\n\
+        "ran          {:.1} s, {} frames sent ({:.1} Hz), {} model frames made {} frames ahead of the analysis, {} late, {} sender stalls\n\
          latency      p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (added: sent later than the heard music plus the lead)\n\
          processing   p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms (audio in → pose ready)\n\
          tick to sent p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms (scheduled tick → send_to returned)\n\
@@ -221,6 +221,7 @@ pub fn summary(r: &StatsReport) -> String {
         r.frames_sent,
         r.frames_sent as f64 / r.wall_s.max(1e-9),
         r.model_frames,
+        r.horizon_frames,
         r.late_frames,
         r.sender_stalls,
         r.latency_ms_p50,

@@ -287,6 +287,8 @@ impl Pipeline {
         if matches!(motion, Some(Err(_))) {
             return Err(anyhow!("the motion thread panicked"));
         }
-        Ok((self.ctx.stats.report(wall, cpu), sink))
+        let mut report = self.ctx.stats.report(wall, cpu);
+        report.horizon_frames = self.horizon_frames as u64;
+        Ok((report, sink))
     }
 }

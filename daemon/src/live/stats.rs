@@ -361,6 +361,7 @@ impl Stats {
             frames_sent: load(&self.frames_sent),
             late_frames: load(&self.late_frames),
             sender_stalls: load(&self.sender_stalls),
+            horizon_frames: 0,
             model_frames: load(&self.model_frames),
             silence_frames: load(&self.silence_frames),
             packets_sent: load(&self.packets_sent),
@@ -462,6 +463,8 @@ pub struct StatsReport {
     pub late_frames: u64,
     /// Times the sender skipped ticks after falling behind.
     pub sender_stalls: u64,
+    /// Model frames past the newest analysed frame each pose was made for (set by the pipeline).
+    pub horizon_frames: u64,
     /// Model frames stepped.
     pub model_frames: u64,
     /// Frames of silence inserted while no audio arrived.
