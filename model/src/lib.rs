@@ -10,6 +10,7 @@ pub mod foot_lock;
 pub mod metrics;
 pub mod motion;
 pub mod neural;
+pub mod phase_follower;
 pub mod retrieval;
 pub mod rig;
 pub mod rotation;

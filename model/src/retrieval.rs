@@ -311,6 +311,12 @@ pub struct RetrievalDancer {
     clip: usize,
     /// Live beat phase of the last frame, [0, 1).
     phase: f32,
+    /// Whether the phase has been mid-beat since the last wrap (a wrap now starts a clip).
+    armed: bool,
+    /// Smooths the heard phase the clips are warped onto.
+    follower: crate::phase_follower::PhaseFollower,
+    /// How far ahead of the heard beat the clips are timed, seconds.
+    hit_lead_s: f32,
     /// Live bar phase of the last frame, [0, 1).
     bar_phase: f32,
     /// Live tempo, BPM (0 = unknown).
@@ -344,6 +350,16 @@ pub struct RetrievalDancer {
 }
 
 impl RetrievalDancer {
+    /// Sets how far ahead of the heard beat the clips are timed, seconds (default
+    /// [`crate::phase_follower::HIT_LEAD_S`]; 0 = on the heard phase itself).
+    pub fn set_hit_lead(&mut self, seconds: f32) {
+        self.hit_lead_s = if seconds.is_finite() {
+            seconds.clamp(-0.2, 0.2)
+        } else {
+            0.0
+        };
+    }
+
     /// A dancer playing `library`; fails if the library holds no clip.
     pub fn new(library: ClipLibrary, seed: u64) -> Result<Self, RetrievalError> {
         if library.clips.is_empty() {
@@ -355,6 +371,9 @@ impl RetrievalDancer {
             started: false,
             clip: 0,
             phase: 0.0,
+            armed: true,
+            follower: crate::phase_follower::PhaseFollower::new(),
+            hit_lead_s: crate::phase_follower::HIT_LEAD_S,
             bar_phase: 0.0,
             tempo: 0.0,
             energy: f32::NAN,
@@ -402,16 +421,26 @@ impl RetrievalDancer {
     fn read_music(&mut self, m: Option<&[f32; FEATURE_DIM]>) -> bool {
         let Some(m) = m else { return false };
         let mut wrapped = false;
+        let t = m[FeatureLayout::TEMPO];
+        if t.is_finite() && t >= 0.0 {
+            self.tempo = t;
+        }
         if let Some(p) = phase_of(m[FeatureLayout::BEAT_SIN], m[FeatureLayout::BEAT_COS]) {
-            wrapped = self.started && p < self.phase - 0.5;
+            let p =
+                self.follower
+                    .follow_ahead(p, self.tempo, RETRIEVAL_FPS as f32, self.hit_lead_s);
+            // A beat is passed once per beat: a grid re-anchored near the beat can step the
+            // phase back over the wrap, which must not start a second clip.
+            wrapped = self.started && self.armed && p < self.phase - 0.5;
+            if wrapped {
+                self.armed = false;
+            } else if (0.25..0.75).contains(&p) {
+                self.armed = true;
+            }
             self.phase = p;
         }
         if let Some(b) = phase_of(m[FeatureLayout::BAR_SIN], m[FeatureLayout::BAR_COS]) {
             self.bar_phase = b;
-        }
-        let t = m[FeatureLayout::TEMPO];
-        if t.is_finite() && t >= 0.0 {
-            self.tempo = t;
         }
         let e = m[FeatureLayout::ENERGY];
         if e.is_finite() {
@@ -661,6 +690,8 @@ impl MotionSource for RetrievalDancer {
         self.started = false;
         self.clip = 0;
         self.phase = 0.0;
+        self.armed = true;
+        self.follower.reset();
         self.bar_phase = 0.0;
         self.tempo = 0.0;
         self.energy = f32::NAN;

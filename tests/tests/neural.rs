@@ -39,11 +39,16 @@ fn shipped_model_says_what_it_was_trained_on() {
     let model = daemon::dancer::load_model(None).unwrap();
     let t = &model.training;
     assert!(t.data.contains("tang2018"), "{t:?}");
-    assert!(t.recipe.starts_with("danced train "), "{t:?}");
+    assert!(t.recipe.starts_with("danced-train dancer "), "{t:?}");
     assert_eq!(t.dances, 30, "{t:?}");
     assert!(t.frames > 40_000 && t.steps > 1000, "{t:?}");
-    // The live constraint of the issue: look-ahead at most 0.25 s.
-    assert!(model.config.lookahead as f64 / 25.0 <= 0.25);
+    // Trained on the music as live delivers it: predicted over the data horizon, no look-ahead.
+    assert_eq!(
+        t.horizon_frames,
+        daemon::horizon::data_horizon(25.0),
+        "{t:?}"
+    );
+    assert_eq!(model.config.lookahead, 0);
 }
 
 #[test]
