@@ -52,8 +52,8 @@ pub fn splice(
     let cut = nearest(a.2, cut_near_s)?;
     let resume = nearest(b.2, resume_near_s)?;
     let r = f64::from(rate);
-    let cut_i = ((cut * r) as usize).min(a_mono.len());
-    let resume_i = ((resume * r) as usize).min(b_mono.len());
+    let cut_i = ((cut * r).round() as usize).min(a_mono.len());
+    let resume_i = ((resume * r).round() as usize).min(b_mono.len());
     let cut_s = cut_i as f64 / r;
     let mut samples = a_mono[..cut_i].to_vec();
     samples.extend_from_slice(&b_mono[resume_i..]);

@@ -58,7 +58,7 @@ fn a_dance_builds_into_aligned_finite_features() {
     let out = std::env::temp_dir().join(format!("danced-ds-{}.npz", std::process::id()));
     write_dataset(&out, &[built]).unwrap();
     let manifest = std::fs::read_to_string(out.with_extension("json")).unwrap();
-    assert!(manifest.contains("\"DANCE_W_22\"") && manifest.contains("\"dataset_version\": 1"));
+    assert!(manifest.contains("\"DANCE_W_22\"") && manifest.contains("\"dataset_version\": 2"));
     assert!(std::fs::metadata(&out).unwrap().len() > 100_000);
     std::fs::remove_file(&out).ok();
     std::fs::remove_file(out.with_extension("json")).ok();
