@@ -81,7 +81,7 @@ fn shape_of(bones: &[protocols::BoneSample]) -> BodyShape {
 /// Linear interpolation of `reference` (frame i at i / rate) at `t_s`; None outside it.
 fn sample(reference: &[BodyShape], rate: f64, t_s: f64, out: &mut [Vec3]) -> Option<()> {
     let x = t_s * rate;
-    if !(x >= 0.0) {
+    if x.is_nan() || x < 0.0 {
         return None;
     }
     let i = x.floor() as usize;

@@ -139,6 +139,9 @@ fn steady_songs(set: &crate::bench::BenchSet) -> Vec<(f64, &crate::bench::BenchI
     steady
 }
 
+/// A song that may be joined to another: tempo, name, audio, beats, quiet section.
+type JoinCandidate = (f64, String, ReplayAudio, Vec<f64>, Option<(f64, f64)>);
+
 /// Seconds into the first song the second one cuts in, and into the second where it resumes.
 const CUT_NEAR_S: f64 = 16.0;
 const RESUME_NEAR_S: f64 = 8.0;
@@ -180,7 +183,7 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
     }
     // Pairs of songs joined on a beat: the same sample rate, tempos a fifth or more apart, no
     // quiet section where it is measured (a break is another test).
-    let decoded: Vec<(f64, String, ReplayAudio, Vec<f64>, Option<(f64, f64)>)> = set
+    let decoded: Vec<JoinCandidate> = set
         .items
         .iter()
         .filter_map(|i| {
