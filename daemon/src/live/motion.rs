@@ -43,13 +43,9 @@ pub fn quantize_target(
     };
     // The first beat at least half a model frame ahead (a beat "now" is too late to reach).
     let earliest = now_s + 0.5 / model_rate;
-    let (first, index) = if grid.locked {
-        let m = ((earliest - grid.next_beat_s) / period).floor() + 1.0;
-        let bpb = i64::from(grid.beats_per_bar.max(1));
-        let idx = (i64::from(grid.next_index_in_bar.max(1)) - 1 + m as i64).rem_euclid(bpb) + 1;
-        (grid.next_beat_s + m * period, idx as u32)
-    } else {
-        (now_s + period, 1)
+    let (first, index) = match grid.beat_after(earliest) {
+        Some(b) if grid.locked && grid.period_s > 0.0 => (b.time_s, b.index_in_bar),
+        _ => (now_s + period, 1),
     };
     match q {
         Quantize::Now => now_s + f64::from(transition_beats.max(0.0)) * period,
