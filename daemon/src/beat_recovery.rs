@@ -20,8 +20,8 @@ pub struct Splice {
     pub cut_s: f64,
 }
 
-/// Mono mix of interleaved `samples`.
-fn mono(samples: &[f32], channels: u16) -> Vec<f32> {
+/// Mono mix of interleaved `samples` of `channels` channels.
+pub fn mono(samples: &[f32], channels: u16) -> Vec<f32> {
     let ch = usize::from(channels.max(1));
     samples
         .chunks_exact(ch)

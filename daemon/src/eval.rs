@@ -317,19 +317,12 @@ pub fn dance_to(
 ) -> Vec<Pose> {
     let look = source.lookahead_frames();
     source.reset(seed);
-    let mut pose = Pose::rest();
     let frames = frames.min(music.len().saturating_sub(look));
-    let mut out = Vec::with_capacity(frames);
-    for i in 0..frames {
-        let controls = Controls {
-            temperature,
-            key_pose: target_at(cues, i, lead),
-            beat_accent: None,
-        };
-        source.step(&music[i..=i + look], &controls, &mut pose);
-        out.push(pose);
-    }
-    out
+    crate::motion_lag::dance_stream(source, music, 0, frames, |i| Controls {
+        temperature,
+        key_pose: target_at(cues, i, lead),
+        beat_accent: None,
+    })
 }
 
 /// Songs with exact beats that are in no training dance (`synth-beats`): only the music-side

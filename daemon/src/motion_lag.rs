@@ -61,6 +61,22 @@ pub fn dance_stream(
     out
 }
 
+/// The offline reference for a live run at `lead_ms`: `features` (the song's analysis) danced
+/// by `source` at temperature 0 through the music predicted over the horizon that run uses,
+/// for at most `frames` frames, as body shapes (frame i at i / the source's rate).
+pub fn offline_reference(
+    source: &mut dyn MotionSource,
+    features: &[dsp::FeatureFrame],
+    lead_ms: f64,
+    frames: usize,
+) -> Vec<BodyShape> {
+    let horizon =
+        crate::horizon::source_horizon(&*source, lead_ms * 1e-3, crate::horizon::DEFAULT_MARGIN_S);
+    let music = dsp::predicted_stream(features, horizon);
+    let poses = dance_stream(source, &music, horizon, frames, |_| Controls::default());
+    body_shapes(&poses)
+}
+
 /// Every frame's body shape (joint positions relative to the hips) as the sender would send it.
 pub fn body_shapes(poses: &[Pose]) -> Vec<BodyShape> {
     let mut builder = FrameBuilder::new();
@@ -237,9 +253,9 @@ pub struct LagRun<'a> {
     pub rate_hz: f64,
 }
 
-/// Replays `run.audio` through the live pipeline with `source` at temperature 0 (seeded with
-/// `seed`), receives its native OSC on a local socket, and aligns that with `reference` (the
-/// same song danced offline, frame i at i / `reference_rate`).
+/// Replays `run.audio` through the live pipeline with `source` at temperature 0, receives its
+/// native OSC on a local socket, and aligns that with `reference` (the same song danced
+/// offline, frame i at i / `reference_rate`: [`offline_reference`]).
 pub fn measure_live_lag(
     run: &LagRun<'_>,
     source: Box<dyn MotionSource + Send>,

@@ -5,7 +5,7 @@
 
 use daemon::dancer::{SourceKind, SourceSettings, open_source};
 use daemon::live::replay::ReplayAudio;
-use daemon::motion_lag::{LagRun, body_shapes, dance_stream, measure_live_lag};
+use daemon::motion_lag::{LagRun, measure_live_lag, offline_reference};
 use daemon::offline::{AnalyzeOptions, analyze_samples};
 
 /// Seconds of the demo song replayed, and left out while the tracker locks on.
@@ -27,15 +27,7 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
     )
     .unwrap();
     let mut offline = open_source(kind, &settings, 1).unwrap();
-    let horizon = daemon::horizon::source_horizon(
-        &*offline,
-        lead_ms * 1e-3,
-        daemon::horizon::DEFAULT_MARGIN_S,
-    );
-    let music = dsp::predicted_stream(&a.features, horizon);
-    let poses = dance_stream(&mut *offline, &music, horizon, music.len(), |_| {
-        model::source::Controls::default()
-    });
+    let reference = offline_reference(&mut *offline, &a.features, lead_ms, usize::MAX);
     let run = LagRun {
         audio,
         seconds: SECONDS,
@@ -46,7 +38,7 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
     let live = measure_live_lag(
         &run,
         open_source(kind, &settings, 1).unwrap(),
-        &body_shapes(&poses),
+        &reference,
         offline.frame_rate(),
     )
     .unwrap();

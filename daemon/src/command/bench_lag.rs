@@ -10,7 +10,7 @@ use crate::command::source::SourceArgs;
 use crate::dancer::{SourceKind, SourceSettings, open_source};
 use crate::live::config::Config;
 use crate::live::replay::ReplayAudio;
-use crate::motion_lag::{LagRun, body_shapes, dance_stream, measure_live_lag};
+use crate::motion_lag::{LagRun, dance_stream, measure_live_lag, offline_reference};
 use crate::offline::{AnalyzeOptions, analyze_samples};
 
 /// Options of `danced bench lag`.
@@ -156,10 +156,12 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
     let mut cases: Vec<(String, crate::beat_recovery::Splice)> = Vec::new();
     // Songs rendered with a tempo jump of their own.
     for item in &set.items {
-        let (Some(info), Ok(a)) = (song_info(item), ReplayAudio::from_file(&item.audio)) else {
+        let Some(info) = song_info(item) else {
             continue;
         };
-        if let Some(cut_s) = info.tempo_change_s {
+        if let Some(cut_s) = info.tempo_change_s
+            && let Ok(a) = ReplayAudio::from_file(&item.audio)
+        {
             let end_bpm = 60.0
                 / item
                     .beats
@@ -169,11 +171,7 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
             cases.push((
                 format!("{:.0} → {end_bpm:.0} BPM (in {})", info.bpm, item.name),
                 crate::beat_recovery::Splice {
-                    samples: a
-                        .samples
-                        .chunks_exact(usize::from(a.channels.max(1)))
-                        .map(|f| f.iter().sum::<f32>() / f.len() as f32)
-                        .collect(),
+                    samples: crate::beat_recovery::mono(&a.samples, a.channels),
                     sample_rate: a.sample_rate,
                     beats: item.beats.clone(),
                     cut_s,
@@ -337,17 +335,8 @@ pub fn bench_lag(args: BenchLagArgs) -> Result<()> {
                 // The reference: the same song danced offline at the horizon the run uses.
                 let mut offline = open_source(kind, &settings, seed)?;
                 let rate = offline.frame_rate();
-                let horizon = crate::horizon::source_horizon(
-                    &*offline,
-                    lead_ms * 1e-3,
-                    crate::horizon::DEFAULT_MARGIN_S,
-                );
-                let music = dsp::predicted_stream(&a.features, horizon);
                 let frames = ((args.seconds + 1.0) * rate) as usize;
-                let poses = dance_stream(&mut *offline, &music, horizon, frames, |_| {
-                    model::source::Controls::default()
-                });
-                let reference = body_shapes(&poses);
+                let reference = offline_reference(&mut *offline, &a.features, lead_ms, frames);
                 let run = LagRun {
                     audio: &song.audio,
                     seconds: args.seconds,
