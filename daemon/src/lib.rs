@@ -22,3 +22,4 @@ pub mod plot;
 pub mod pool;
 pub mod pose_bank;
 pub mod progress;
+pub mod view;

@@ -13,8 +13,11 @@ use crate::live::control_queue::ControlHub;
 use crate::live::io::{ControlInputs, OscSink};
 use crate::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
 use crate::live::replay::{self, ReplayAudio, ReplaySettings};
+use crate::live::sink::FrameSink;
 use crate::live::stats::StatsReport;
 use crate::live::status::StatusPrinter;
+use crate::view::assets::Assets;
+use crate::view::{LiveFeed, SinkPair, ViewHello, ViewServer};
 
 /// Where the audio comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -95,10 +98,39 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         Some(p) => crate::pose_bank::PoseBank::load(p)?,
         None => crate::pose_bank::PoseBank::shipped()?,
     };
-    let sink = OscSink::from_config(config)?;
-    let targets = sink.describe();
+    let osc = OscSink::from_config(config)?;
+    let targets = osc.describe();
     let mut hub = ControlHub::new(&poses, ctx.stats.clone());
     let controls = ControlInputs::start(config, &mut hub, ctx.stop.clone())?;
+    let mut sink: Box<dyn FrameSink> = Box::new(osc);
+    let view = if config.view.enabled {
+        let hello = ViewHello {
+            mode: "live",
+            dancer: kind.name().to_string(),
+            poses: hub.pose_names(),
+            rate_hz: config.output.rate_hz,
+            model_rate_hz: source.frame_rate(),
+            lead_ms: config.output.lead_ms,
+            ..ViewHello::default()
+        };
+        let feed = LiveFeed {
+            stats: ctx.stats.clone(),
+            controls: hub.sender(),
+        };
+        let (server, view_sink) = ViewServer::start(
+            &config.view.addr,
+            Assets::page(&model::rig::Skeleton::default_adult()),
+            hello,
+            Some(feed),
+            ctx.stop.clone(),
+        )?;
+        if let Some(v) = view_sink {
+            sink = Box::new(SinkPair::new(sink, Box::new(v)));
+        }
+        Some(server)
+    } else {
+        None
+    };
     let settings = PipelineSettings {
         rate_hz: config.output.rate_hz,
         speed: if matches!(audio, AudioSource::Capture(_)) {
@@ -119,7 +151,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         settings,
         PipelineParts {
             source,
-            sink: Box::new(sink),
+            sink,
             controls: hub,
         },
         reader,
@@ -136,6 +168,9 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             settings.lead_ms,
             pipeline.horizon_frames()
         );
+        if let Some(v) = &view {
+            eprintln!("view: open {} in a browser", v.url());
+        }
         if let Some(a) = controls.osc_addr {
             eprintln!("OSC control on {a} (/danced/control/...)");
         }
@@ -169,6 +204,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     }
     status.finish();
     let (mut report, _sink) = pipeline.stop()?;
+    report.view = view.map(ViewServer::stop);
     let counters = controls.counters.clone();
     controls.join();
     report.osc_control_accepted = counters.osc_accepted.load(Ordering::Relaxed);
@@ -216,7 +252,7 @@ pub fn summary(r: &StatsReport) -> String {
          queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
          packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
          controls     {} applied, {} rejected, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
-         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full)",
+         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}",
         r.wall_s,
         r.frames_sent,
         r.frames_sent as f64 / r.wall_s.max(1e-9),
@@ -280,5 +316,27 @@ pub fn summary(r: &StatsReport) -> String {
         r.midi_bytes_dropped,
         r.midi_skipped,
         r.midi_queue_full,
+        r.view
+            .map(|v| view_summary(&v, r.wall_s))
+            .unwrap_or_default(),
+    )
+}
+
+/// The view's line of the summary.
+fn view_summary(v: &crate::view::ViewReport, wall_s: f64) -> String {
+    format!(
+        "\nview         {} browsers ({} dropped for falling behind, {} refused), {} frames forwarded, {} skipped, {} replaced in the slot, {} events dropped; {} files served, {} HTTP errors; controls {} accepted, {} ignored; view thread {:.2} % of one core",
+        v.clients_accepted,
+        v.clients_dropped_slow,
+        v.clients_refused,
+        v.frames_forwarded,
+        v.frames_skipped,
+        v.frames_replaced,
+        v.events_dropped,
+        v.http_served,
+        v.http_errors,
+        v.controls_accepted,
+        v.controls_ignored,
+        v.thread_cpu_us as f64 * 1e-4 / wall_s.max(1e-9),
     )
 }

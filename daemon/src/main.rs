@@ -20,6 +20,7 @@ use daemon::command::library::{LibraryCommand, library};
 use daemon::command::metrics::{MetricsArgs, metrics};
 use daemon::command::moved::{MovedArgs, moved};
 use daemon::command::run::{RunArgs, run};
+use daemon::command::view::{ViewArgs, view};
 
 // Counts allocations in the audio callback path (see `daemon::alloc_counter`).
 #[global_allocator]
@@ -51,6 +52,8 @@ enum Command {
     },
     /// Dance to a song offline through the streaming analysis and write the motion as BVH.
     Generate(GenerateArgs),
+    /// Play a dance file in the browser view, with its song in sync when given.
+    View(ViewArgs),
     /// Export a tang2018 dance, fitted to the rig, as BVH.
     Bvh(BvhArgs),
     /// Dance metrics of a BVH motion against a song's beats (BeatAlign, beat offset, kinetic
@@ -108,6 +111,7 @@ fn main() -> Result<()> {
             BenchCommand::Model(args) => bench_model(&args),
         },
         Command::Generate(args) => generate(&args),
+        Command::View(args) => view(&args),
         Command::Bvh(args) => bvh_export(&args),
         Command::Metrics(args) => metrics(&args),
         Command::Run(args) => run(args),

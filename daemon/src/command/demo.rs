@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use crate::command::source::SourceArgs;
+use crate::command::view_flag::ViewFlag;
 use crate::live::config::Config;
 use crate::live_cli::{AudioSource, RunMode, run_live, summary};
 
@@ -22,6 +23,8 @@ pub struct DemoArgs {
     pub stats_json: Option<PathBuf>,
     #[command(flatten)]
     pub dancer: SourceArgs,
+    #[command(flatten)]
+    pub view: ViewFlag,
 }
 
 /// Runs `danced demo`.
@@ -31,9 +34,11 @@ pub fn demo(args: DemoArgs) -> Result<()> {
         rate,
         stats_json,
         dancer,
+        view,
     } = args;
     let mut config = Config::default();
     dancer.apply(&mut config);
+    view.apply(&mut config);
     config.audio.duration = duration;
     config.stats_json = stats_json;
     if let Some(r) = rate {

@@ -17,3 +17,5 @@ pub mod moved;
 pub mod run;
 pub mod source;
 pub mod tracker;
+pub mod view;
+pub mod view_flag;

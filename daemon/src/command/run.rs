@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use crate::command::source::SourceArgs;
+use crate::command::view_flag::ViewFlag;
 use crate::live::config::Config;
 use crate::live_cli::{AudioSource, RunMode, run_live, summary};
 
@@ -69,6 +70,8 @@ pub struct RunArgs {
     pub poses: Option<PathBuf>,
     #[command(flatten)]
     pub dancer: SourceArgs,
+    #[command(flatten)]
+    pub view: ViewFlag,
     /// MIDI map (TOML; default: the built-in configs/midi/generic.toml).
     #[arg(long)]
     pub midi_map: Option<PathBuf>,
@@ -138,6 +141,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         config.control.midi_map = args.midi_map;
     }
     args.dancer.apply(&mut config);
+    args.view.apply(&mut config);
     config.validate("command line")?;
     let audio = match (&config.audio.input, &config.audio.device) {
         (Some(i), _) => AudioSource::File(i.clone()),

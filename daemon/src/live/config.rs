@@ -54,6 +54,8 @@ pub struct Config {
     pub control: ControlConfig,
     /// The dancer.
     pub dancer: DancerConfig,
+    /// The browser view.
+    pub view: ViewConfig,
     /// Write the run's stats here as JSON when it ends.
     pub stats_json: Option<PathBuf>,
 }
@@ -210,6 +212,25 @@ impl Default for ControlConfig {
     }
 }
 
+/// `[view]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ViewConfig {
+    /// Serve the browser view.
+    pub enabled: bool,
+    /// host:port it listens on (loopback unless told otherwise).
+    pub addr: String,
+}
+
+impl Default for ViewConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            addr: crate::view::DEFAULT_VIEW_ADDR.into(),
+        }
+    }
+}
+
 /// `[dancer]`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -297,6 +318,15 @@ impl Config {
             && !(d.is_finite() && d > 0.0)
         {
             return Err(bad("audio.duration", format!("= {d}: must be positive")));
+        }
+        if self.view.addr.parse::<std::net::SocketAddr>().is_err() {
+            return Err(bad(
+                "view.addr",
+                format!(
+                    "= {:?}: must be host:port, e.g. 127.0.0.1:8080",
+                    self.view.addr
+                ),
+            ));
         }
         if self.audio.input.is_some() && self.audio.device.is_some() {
             return Err(bad("audio.input", "and audio.device are exclusive".into()));
@@ -397,6 +427,7 @@ mod tests {
         assert_eq!(c.output, OutputConfig::default());
         assert_eq!(c.dancer, DancerConfig::default());
         assert_eq!(c.control, ControlConfig::default());
+        assert_eq!(c.view, ViewConfig::default());
     }
 
     #[test]

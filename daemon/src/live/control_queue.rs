@@ -135,6 +135,15 @@ impl ControlHub {
         }
     }
 
+    /// The key poses' names by index (what the browser view offers buttons for).
+    pub fn pose_names(&self) -> Vec<String> {
+        let mut names = vec![String::new(); self.table.len()];
+        for (name, &i) in self.names.iter() {
+            names[usize::from(i)] = name.clone();
+        }
+        names
+    }
+
     /// The key poses by index, for the motion thread.
     pub fn table(&self) -> &[[Quat; JOINT_COUNT]] {
         &self.table

@@ -163,6 +163,11 @@ pub fn run(
                 frames_to_go: ((k.target_s - t) * rate).round().max(0.0) as u32,
             })
         });
+        if let Some(k) = &st.key {
+            stats
+                .key_pose_index
+                .store(u32::from(k.pose), Ordering::Relaxed);
+        }
         match st.controls.key_pose {
             Some(k) => {
                 stats

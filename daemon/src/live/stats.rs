@@ -228,6 +228,8 @@ pub struct Stats {
     pub key_pose_state: AtomicU32,
     /// Frames left to a pending key pose.
     pub key_pose_frames_to_go: AtomicU32,
+    /// Bank index of the pending (or last reached) key pose.
+    pub key_pose_index: AtomicU32,
     /// 1 while paused.
     pub paused: AtomicU32,
     rss: Mutex<Vec<(f64, u64)>>,
@@ -281,6 +283,7 @@ impl Stats {
             beat_accent: AtomicF32::default(),
             key_pose_state: AtomicU32::new(KEY_POSE_NONE),
             key_pose_frames_to_go: AtomicU32::new(0),
+            key_pose_index: AtomicU32::new(0),
             paused: AtomicU32::new(0),
             // One sample a second: two hours before this ever grows.
             rss: Mutex::new(Vec::with_capacity(7200)),
@@ -379,6 +382,7 @@ impl Stats {
             midi_bytes_dropped: 0,
             midi_skipped: 0,
             midi_queue_full: 0,
+            view: None,
         }
     }
 }
@@ -499,6 +503,9 @@ pub struct StatsReport {
     pub midi_skipped: u64,
     /// MIDI messages lost because the queue from the MIDI driver's thread was full.
     pub midi_queue_full: u64,
+    /// The browser view's counters, when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub view: Option<crate::view::ViewReport>,
 }
 
 /// Resident set size of this process, bytes (Linux `/proc/self/statm`; `None` elsewhere).

@@ -1,0 +1,99 @@
+//! The page's head-up display data: what the run is (once per client) and how it is doing (ten
+//! times a second), as JSON text messages beside the binary OSC.
+
+use std::sync::atomic::Ordering;
+
+use serde::Serialize;
+
+use crate::live::stats::{KEY_POSE_PENDING, KEY_POSE_REACHED, Stats};
+
+/// What a page is told when it connects.
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct ViewHello {
+    /// `"live"` (frames over the socket) or `"playback"` (a dance file, fetched whole).
+    pub mode: &'static str,
+    /// The dancer's name.
+    pub dancer: String,
+    /// The key poses the page offers buttons for, in the control path's order.
+    pub poses: Vec<String>,
+    /// Frames per second the run sends (or the dance file holds).
+    pub rate_hz: f64,
+    /// Model frames per second (key-pose countdowns are in these).
+    pub model_rate_hz: f64,
+    /// The output lead, ms.
+    pub lead_ms: f64,
+    /// Whether `/audio` holds the song (playback).
+    pub audio: bool,
+    /// Frames in `/dance.vmc` (playback).
+    pub frames: usize,
+}
+
+/// The run as the HUD shows it.
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct ViewStatus {
+    /// Tempo, BPM (0 before the tracker locks).
+    pub tempo_bpm: f32,
+    /// Beat phase of the newest analysed frame, 0..1.
+    pub beat_phase: f32,
+    /// Temperature now.
+    pub temperature: f32,
+    /// Beat accent now (None: the dancer's own).
+    pub accent: Option<f32>,
+    /// `"none"`, `"pending"` or `"reached"`.
+    pub key_pose: &'static str,
+    /// The pending (or last reached) key pose's name.
+    pub key_pose_name: Option<String>,
+    /// Model frames until the pending key pose.
+    pub key_pose_frames_to_go: u32,
+    /// Whether the dancer is paused.
+    pub paused: bool,
+    /// Added latency p99 of the sender, ms.
+    pub latency_p99_ms: f64,
+    /// Frames sent and, of them, late.
+    pub frames_sent: u64,
+    /// Frames whose pose was held because the motion was late.
+    pub late_frames: u64,
+    /// Controls applied and refused by the control path (all inputs).
+    pub controls_applied: u64,
+    /// See above.
+    pub controls_rejected: u64,
+}
+
+impl ViewStatus {
+    /// The status now; `poses` names key-pose indices.
+    pub fn read(stats: &Stats, poses: &[String]) -> Self {
+        let key = stats.key_pose_state.load(Ordering::Relaxed);
+        let accent = stats.beat_accent.get();
+        let key_index = stats.key_pose_index.load(Ordering::Relaxed) as usize;
+        Self {
+            tempo_bpm: stats.tempo_bpm.get(),
+            beat_phase: stats.beat_phase.get(),
+            temperature: stats.temperature.get(),
+            accent: accent.is_finite().then_some(accent),
+            key_pose: match key {
+                KEY_POSE_PENDING => "pending",
+                KEY_POSE_REACHED => "reached",
+                _ => "none",
+            },
+            key_pose_name: (key == KEY_POSE_PENDING || key == KEY_POSE_REACHED)
+                .then(|| poses.get(key_index).cloned())
+                .flatten(),
+            key_pose_frames_to_go: stats.key_pose_frames_to_go.load(Ordering::Relaxed),
+            paused: stats.paused.load(Ordering::Relaxed) == 1,
+            latency_p99_ms: stats.latency.quantile_ms(0.99),
+            frames_sent: stats.frames_sent.load(Ordering::Relaxed),
+            late_frames: stats.late_frames.load(Ordering::Relaxed),
+            controls_applied: stats.controls_accepted.load(Ordering::Relaxed),
+            controls_rejected: stats.controls_rejected.load(Ordering::Relaxed),
+        }
+    }
+}
+
+/// A JSON text message `{"type": kind, ...value}`.
+pub fn message<T: Serialize>(kind: &str, value: &T) -> String {
+    let mut v = serde_json::to_value(value).unwrap_or_default();
+    if let Some(o) = v.as_object_mut() {
+        o.insert("type".into(), kind.into());
+    }
+    v.to_string()
+}
