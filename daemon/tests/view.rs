@@ -19,6 +19,7 @@ use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use model::source::{Controls, MotionSource};
 
 mod browser;
+mod common;
 
 /// Where the test dancer keeps its hips: off the origin, so the hips' travel is checked too.
 const ROOT: Vec3 = Vec3::new(0.21, 0.93, -0.17);
@@ -178,8 +179,6 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
     assert!(fps >= 30.0, "{fps:.1} frames/s");
 
     // Every pose through the page's own button, as a performer would press it.
-    let names: Vec<String> = BONES.iter().map(|j| j.name().to_string()).collect();
-    let names_js = serde_json::to_string(&names).unwrap();
     let mut worst = 0.0f32;
     for pose in ["arms_up", "pose-2", "pose-7", "pose-12", "tpose"] {
         let pressed = page
@@ -193,55 +192,25 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
         let want = expected(&bank.get(pose).unwrap());
         // The pose lands within a second or so (the control path, a model frame, the 60 Hz
         // interpolation); then the page must hold it within the tolerance.
-        let deadline = Instant::now() + Duration::from_secs(5);
-        let mut table = Vec::new();
-        loop {
-            let got = page
-                .eval(&format!("window.danced.boneWorldPositions({names_js})"))
-                .unwrap();
-            table.clear();
-            let mut max_err = 0.0f32;
-            for j in BONES {
-                let v = &got[j.name()];
-                let vrm = Vec3::new(
-                    v[0].as_f64().unwrap_or(f64::NAN) as f32,
-                    v[1].as_f64().unwrap_or(f64::NAN) as f32,
-                    v[2].as_f64().unwrap_or(f64::NAN) as f32,
-                );
-                let ours = want[j.index()];
-                let err = ours.distance(vrm);
-                max_err = max_err.max(if err.is_finite() { err } else { f32::INFINITY });
-                table.push((j, ours, vrm, err));
-            }
-            if max_err <= TOLERANCE_M || Instant::now() > deadline {
-                worst = worst.max(max_err);
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        eprintln!("{pose}: | bone | our FK (m) | VRM (m) | error (cm) |");
-        for (j, ours, vrm, err) in &table {
-            eprintln!(
-                "| {j} | {:.3} {:.3} {:.3} | {:.3} {:.3} {:.3} | {:.2} |",
-                ours.x,
-                ours.y,
-                ours.z,
-                vrm.x,
-                vrm.y,
-                vrm.z,
-                err * 100.0
-            );
-        }
-        let max = table.iter().map(|r| r.3).fold(0.0f32, f32::max);
-        assert!(
-            max <= TOLERANCE_M,
-            "{pose}: a bone is {:.1} cm from our FK",
-            max * 100.0
-        );
+        worst = worst.max(wait_for_pose(&page, pose, &want));
     }
     eprintln!(
         "worst bone error over the five poses: {:.3} cm",
         worst * 100.0
+    );
+
+    // The HUD: the key pose is reported reached by name, beats flash, the status comes in.
+    let hud = page.wait_for(
+        "window.danced.status && window.danced.status.key_pose === 'reached' \
+         && window.danced.status.key_pose_name === 'tpose' && window.danced.beats > 0 \
+         && window.danced.status.frames_sent > 0 \
+         && document.getElementById('key').textContent === 'tpose reached'",
+        Duration::from_secs(15),
+    );
+    assert!(
+        hud.is_ok(),
+        "{hud:?} status {:?}",
+        page.eval("[window.danced.status, window.danced.beats]")
     );
 
     // The presses went through the control path (validated and counted like OSC's).
@@ -280,4 +249,138 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
     assert_eq!(view.clients_accepted, 1);
     assert_eq!(view.clients_dropped_slow, 0);
     assert!(view.frames_forwarded as f64 > 0.5 * report.frames_sent as f64);
+}
+
+/// Polls the page until its bones are within [`TOLERANCE_M`] of `want` (5 s at most), prints
+/// the conformance table and asserts; returns the largest error, metres.
+fn wait_for_pose(page: &browser::Page, pose: &str, want: &[Vec3; JOINT_COUNT]) -> f32 {
+    let names: Vec<String> = BONES.iter().map(|j| j.name().to_string()).collect();
+    let names_js = serde_json::to_string(&names).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut table = Vec::new();
+    loop {
+        let got = page
+            .eval(&format!("window.danced.boneWorldPositions({names_js})"))
+            .unwrap();
+        table.clear();
+        for j in BONES {
+            let v = &got[j.name()];
+            let c = |i: usize| v[i].as_f64().unwrap_or(f64::NAN) as f32;
+            let vrm = Vec3::new(c(0), c(1), c(2));
+            let ours = want[j.index()];
+            let err = ours.distance(vrm);
+            table.push((
+                j,
+                ours,
+                vrm,
+                if err.is_finite() { err } else { f32::INFINITY },
+            ));
+        }
+        let max = table.iter().map(|r| r.3).fold(0.0f32, f32::max);
+        if max <= TOLERANCE_M || Instant::now() > deadline {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    eprintln!("{pose}: | bone | our FK (m) | VRM (m) | error (mm) |");
+    for (j, ours, vrm, err) in &table {
+        eprintln!(
+            "| {j} | {:.3} {:.3} {:.3} | {:.3} {:.3} {:.3} | {:.3} |",
+            ours.x,
+            ours.y,
+            ours.z,
+            vrm.x,
+            vrm.y,
+            vrm.z,
+            err * 1000.0
+        );
+    }
+    let max = table.iter().map(|r| r.3).fold(0.0f32, f32::max);
+    assert!(
+        max <= TOLERANCE_M,
+        "{pose}: a bone is {:.1} cm from our FK",
+        max * 100.0
+    );
+    max
+}
+
+#[test]
+fn danced_view_plays_a_dance_file_with_its_song() {
+    let Some(_) = browser::chromium_path() else {
+        eprintln!("SKIP: no Chromium (apt-get install chromium-headless-shell)");
+        return;
+    };
+    // Three seconds of one held pose, off the origin, and a click track to go with it.
+    let dir = common::scratch("view-playback");
+    let shipped = daemon::pose_bank::PoseBank::shipped().unwrap();
+    let pose = Pose {
+        root_position: ROOT,
+        local_rotations: PoseBank::get(&shipped, "pose-7").unwrap(),
+    };
+    let skeleton = Skeleton::default_adult();
+    let bvh = dir.join("held.bvh");
+    model::bvh::export(&skeleton, &[pose; 75], 25.0)
+        .write(&bvh)
+        .unwrap();
+    let song = dir.join("clicks.wav");
+    let (samples, _) = common::click_track(3.0, 120.0, 0.25, 44_100);
+    common::write_wav(&song, &samples, 44_100, 2);
+    let mut child = common::danced()
+        .args([
+            "view",
+            bvh.to_str().unwrap(),
+            "--audio",
+            song.to_str().unwrap(),
+        ])
+        .args(["--addr", "127.0.0.1:0", "--duration", "60"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    let url = loop {
+        line.clear();
+        assert!(
+            std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0,
+            "danced view printed no URL"
+        );
+        if let Some(at) = line.find("http://") {
+            break line[at..].split_whitespace().next().unwrap().to_string();
+        }
+    };
+    let chrome = browser::Browser::launch(640, 480).unwrap();
+    let page = chrome.open(&url).unwrap();
+    let playing = page.wait_for(
+        "window.danced && window.danced.ready && window.danced.playbackFrames \
+         && window.danced.framesApplied > 0 && window.danced.playbackTime > 0.5",
+        Duration::from_secs(30),
+    );
+    assert!(
+        playing.is_ok(),
+        "{playing:?}\nconsole: {:?}",
+        page.console()
+    );
+    // 3 s at the view's 60 frames a second.
+    assert_eq!(page.eval("window.danced.playbackFrames").unwrap(), 180);
+    assert_eq!(page.eval("window.danced.hello.audio").unwrap(), true);
+    let requests = page.requests();
+    assert!(
+        requests.iter().any(|r| r.ends_with("/audio")),
+        "{requests:?}"
+    );
+    assert!(
+        requests.iter().any(|r| r.ends_with("/dance.vmc")),
+        "{requests:?}"
+    );
+    eprintln!(
+        "audio clock in the page: {}",
+        page.eval("window.danced.audioTime").unwrap()
+    );
+    let mut want = [Vec3::ZERO; JOINT_COUNT];
+    skeleton.world_positions(&pose, &mut want);
+    wait_for_pose(&page, "pose-7 from the file", &want);
+    drop(page);
+    drop(chrome);
+    let _ = child.kill();
+    let _ = child.wait();
 }

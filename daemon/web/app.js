@@ -302,6 +302,8 @@ function connect() {
 
 // ---- Playback of a dance file (`danced view`) ----
 async function startPlayback(h) {
+  if (state.playbackStarted) return; // a reconnect says hello again
+  state.playbackStarted = true;
   const bytes = new Uint8Array(await (await fetch('/dance.vmc')).arrayBuffer());
   const view = new DataView(bytes.buffer);
   const packets = [];
@@ -326,6 +328,7 @@ async function startPlayback(h) {
     const t = audio ? audio.currentTime : ((performance.now() - started) / 1000) % duration;
     const i = Math.min(packets.length - 1, Math.max(0, Math.floor(t * h.rate_hz)));
     state.playbackTime = t;
+    state.audioTime = audio ? audio.currentTime : null;
     if (packets.length && i !== state.playbackIndex) {
       state.playbackIndex = i;
       applyVmc(decodeOsc(packets[i]));

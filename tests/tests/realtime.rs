@@ -131,6 +131,9 @@ fn live_run(source: &'static str) -> JoinHandle<LiveRun> {
         config.control.osc_port = free_port();
         config.audio.duration = Some(RUN_S);
         config.dancer.source = source.into();
+        // The browser view too: the sender hands it every frame and event.
+        config.view.enabled = true;
+        config.view.addr = "127.0.0.1:0".into();
         let control = controller(config.control.osc_port, stop.clone());
         let report = run_live(&config, AudioSource::Demo, RunMode::Quiet).unwrap();
         stop.store(true, Ordering::Relaxed);
@@ -218,6 +221,9 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
             "vrchat {:?}",
             run.received
         );
+        // The view took the frames (no browser connected: taken from the slot, not sent).
+        let view = r.view.expect("the view ran");
+        assert_eq!(view.events_dropped, 0, "{view:?}");
         // The control traffic went through the real path.
         assert!(r.osc_control_accepted > run.control_sent / 2, "{r:?}");
         assert!(

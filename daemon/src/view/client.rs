@@ -13,6 +13,11 @@ pub const MAX_BEHIND: Duration = Duration::from_secs(2);
 /// client is behind and frames are skipped, never queued).
 pub const MAX_BUFFERED_BYTES: usize = 256 * 1024;
 
+/// Kernel send buffer per client: about half a second of frames. Left to autotuning, Linux lets
+/// it grow to megabytes, which a stalled tab (a background one, say) would fill with a minute
+/// of stale frames to play back late; kept small, it is found behind at once and skips instead.
+pub const SEND_BUFFER_BYTES: i32 = 32 * 1024;
+
 /// What became of a write or a read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ClientState {
@@ -40,6 +45,7 @@ impl ViewClient {
         stream.set_nonblocking(true)?;
         // Frames are small and latency matters more than packet count.
         stream.set_nodelay(true)?;
+        limit_send_buffer(stream);
         Ok(Self {
             ws,
             peer,
@@ -101,6 +107,27 @@ impl ViewClient {
                 Err(_) => return ClientState::Gone,
             }
         }
+    }
+}
+
+fn limit_send_buffer(stream: &TcpStream) {
+    use std::os::fd::AsRawFd;
+    let size = SEND_BUFFER_BYTES;
+    // SAFETY: setsockopt reads one c_int from a live local for a socket this stream owns.
+    let rc = unsafe {
+        libc::setsockopt(
+            stream.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_SNDBUF,
+            (&size as *const i32).cast(),
+            std::mem::size_of::<i32>() as libc::socklen_t,
+        )
+    };
+    if rc != 0 {
+        tracing::debug!(
+            "view: SO_SNDBUF not set: {}",
+            std::io::Error::last_os_error()
+        );
     }
 }
 
