@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use model::neural::dancer::NeuralDancer;
 use model::neural::file::NeuralModel;
+use model::neural::safety::SafetyNets;
 use model::retrieval::{ClipLibrary, RetrievalDancer};
 use model::source::MotionSource;
 
@@ -60,6 +61,8 @@ pub struct SourceSettings<'a> {
     pub model: Option<&'a Path>,
     /// Clip library file.
     pub library: Option<&'a Path>,
+    /// The neural network alone: every safety net off but the non-finite guard.
+    pub network_only: bool,
 }
 
 /// Reads the neural model from `path`, or the shipped one when `path` is `None`.
@@ -93,11 +96,19 @@ pub fn open_source(
             if let Some(a) = settings.beat_accent {
                 d.set_beat_accent(a);
             }
+            if settings.network_only {
+                d.set_safety_nets(SafetyNets::NETWORK_ONLY);
+            }
             Box::new(d)
         }
         SourceKind::Retrieval => {
             if settings.model.is_some() {
                 bail!("a model file is for the neural source, not the retrieval one");
+            }
+            if settings.network_only {
+                bail!(
+                    "--network-only is for the neural source: the retrieval dancer has no network"
+                );
             }
             let (library, _) = load_library(settings.library)?;
             Box::new(RetrievalDancer::new(library, seed).context("starting the retrieval dancer")?)

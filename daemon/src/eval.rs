@@ -325,10 +325,24 @@ pub fn dance_to(
     })
 }
 
+/// Tempo bands of the music-side table, BPM (lower bound inclusive).
+pub const TEMPO_BANDS: [(f64, f64); 3] = [(60.0, 100.0), (100.0, 130.0), (130.0, 180.0)];
+
+/// One song of the [`MusicSet`].
+struct MusicSong {
+    features: Vec<[f32; dsp::feature::FEATURE_DIM]>,
+    beats: Vec<f64>,
+    /// The same beats half a beat later: where a dancer at chance is as often as on the beat.
+    off_beats: Vec<f64>,
+    bpm: f64,
+    /// Quiet sections and drumless intros, seconds.
+    quiet: Vec<(f64, f64)>,
+}
+
 /// Songs with exact beats that are in no training dance (`synth-beats`): only the music-side
 /// metrics apply (no ground-truth motion).
 pub struct MusicSet {
-    songs: Vec<(String, Vec<[f32; dsp::feature::FEATURE_DIM]>, Vec<f64>)>,
+    songs: Vec<MusicSong>,
 }
 
 /// A music-side row: how the motion follows songs the model never saw.
@@ -340,12 +354,69 @@ pub struct MusicRow {
     pub beat_align: f64,
     /// BeatAlign against the next three songs' beats.
     pub beat_align_other: f64,
+    /// BeatAlign on the beats minus on the beats shifted half a beat, per [`TEMPO_BANDS`]
+    /// (mean over the band's songs; 0 is chance).
+    pub on_minus_off: [f64; 3],
+    /// Songs in each band.
+    pub band_songs: [usize; 3],
+    /// Mean joint speed in quiet sections and drumless intros over that in the rest (mean over
+    /// the songs that have them).
+    pub quiet_speed_ratio: f64,
+    /// Songs with a quiet part.
+    pub quiet_songs: usize,
     /// Transflower beat offset, seconds.
     pub beat_offset_s: f64,
     /// Freezes, summed over songs.
     pub freezes: usize,
     /// Songs scored.
     pub songs: usize,
+}
+
+/// What a `synth-beats` song's JSON says of its tempo and quiet parts.
+fn song_facts(audio: &Path) -> Option<(f64, Vec<(f64, f64)>)> {
+    let json = std::fs::read_to_string(audio.with_extension("json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&json).ok()?;
+    let bpm = v["tempo_start_bpm"].as_f64()?;
+    let mut quiet = Vec::new();
+    let q = &v["quiet_section"];
+    if let Some(span) = q["start_s"].as_f64().zip(q["end_s"].as_f64()) {
+        quiet.push(span);
+    }
+    let intro_bars = v["drumless_intro_bars"].as_f64().unwrap_or(0.0);
+    if intro_bars > 0.0 {
+        let first = v["first_beat_s"].as_f64().unwrap_or(0.0);
+        let per_bar = v["beats_per_bar"].as_f64().unwrap_or(4.0);
+        quiet.push((0.0, first + intro_bars * per_bar * 60.0 / bpm));
+    }
+    Some((bpm, quiet))
+}
+
+/// Mean joint speed (m/s) in frames inside `spans` and outside them, skipping the first 2 s.
+fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64, f64) {
+    let fps = TANG_FPS;
+    let frames = track.len() / JOINT_COUNT;
+    let (mut inside, mut outside) = ((0.0, 0usize), (0.0, 0usize));
+    for f in (2.0 * fps) as usize..frames {
+        let t = f as f64 / fps;
+        let speed: f64 = (0..JOINT_COUNT)
+            .map(|j| {
+                f64::from(track[f * JOINT_COUNT + j].distance(track[(f - 1) * JOINT_COUNT + j]))
+            })
+            .sum::<f64>()
+            * fps
+            / JOINT_COUNT as f64;
+        let acc = if spans.iter().any(|&(a, b)| (a..b).contains(&t)) {
+            &mut inside
+        } else {
+            &mut outside
+        };
+        acc.0 += speed;
+        acc.1 += 1;
+    }
+    (
+        inside.0 / inside.1.max(1) as f64,
+        outside.0 / outside.1.max(1) as f64,
+    )
 }
 
 impl MusicSet {
@@ -365,11 +436,18 @@ impl MusicSet {
                 &mut |_, _| {},
             )
             .with_context(|| format!("analysing {}", item.audio.display()))?;
-            songs.push((
-                item.name,
-                dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS)),
-                item.beats,
-            ));
+            let (bpm, quiet) = song_facts(&item.audio).unwrap_or((0.0, Vec::new()));
+            let off_beats = item.beats.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+            songs.push(MusicSong {
+                features: dsp::predicted_stream(
+                    &a.features,
+                    crate::horizon::data_horizon(TANG_FPS),
+                ),
+                beats: item.beats,
+                off_beats,
+                bpm,
+                quiet,
+            });
         }
         Ok(MusicSet { songs })
     }
@@ -389,34 +467,67 @@ impl MusicSet {
             songs: n,
             ..MusicRow::default()
         };
-        for (i, (_, music, beats)) in self.songs.iter().enumerate() {
+        for (i, song) in self.songs.iter().enumerate() {
+            let music = &song.features;
             let motion = dance_to(source, music, music.len(), temperature, seed, &[], 0);
             let p = skeleton.trajectory(&motion);
             let track = JointTrack::new(&p, JOINT_COUNT, TANG_FPS)?;
-            row.beat_align += beat_align(&track, beats) / n as f64;
+            let on = beat_align(&track, &song.beats);
+            row.beat_align += on / n as f64;
             let others: Vec<f64> = (1..=3.min(n - 1))
-                .map(|k| beat_align(&track, &self.songs[(i + k) % n].2))
+                .map(|k| beat_align(&track, &self.songs[(i + k) % n].beats))
                 .collect();
             row.beat_align_other +=
                 others.iter().sum::<f64>() / others.len().max(1) as f64 / n as f64;
-            if let Ok(o) = beat_offset(&track, Joint::Hips.index(), beats) {
+            if let Some(b) = TEMPO_BANDS
+                .iter()
+                .position(|&(lo, hi)| (lo..hi).contains(&song.bpm))
+            {
+                row.on_minus_off[b] += on - beat_align(&track, &song.off_beats);
+                row.band_songs[b] += 1;
+            }
+            if !song.quiet.is_empty() {
+                let (inside, outside) = speed_inside_and_out(&p, &song.quiet);
+                if outside > 0.0 {
+                    row.quiet_speed_ratio += inside / outside;
+                    row.quiet_songs += 1;
+                }
+            }
+            if let Ok(o) = beat_offset(&track, Joint::Hips.index(), &song.beats) {
                 row.beat_offset_s += o.mean_s / n as f64;
             }
             row.freezes += detect_freezes(&track, FreezeParams::default())?.freezes;
         }
+        for (d, k) in row.on_minus_off.iter_mut().zip(row.band_songs) {
+            *d /= k.max(1) as f64;
+        }
+        row.quiet_speed_ratio /= row.quiet_songs.max(1) as f64;
         Ok(row)
     }
 }
 
 /// The music-side table of `danced eval`.
 pub fn music_table(rows: &[MusicRow]) -> String {
-    let mut s = String::from(
-        "| system | BeatAlign ↑ | vs other songs | beat offset s ↓ | freezes |\n| --- | --- | --- | --- | --- |\n",
+    let bands = rows.first().map_or([0; 3], |r| r.band_songs);
+    let mut s = format!(
+        "| system | BeatAlign ↑ | vs other songs | on − half-beat-shifted beats, 60–100 / 100–130 / 130–180 BPM ({} / {} / {} songs) ↑ | joint speed quiet / rest ({} songs) ↓ | beat offset s ↓ | freezes |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+        bands[0],
+        bands[1],
+        bands[2],
+        rows.first().map_or(0, |r| r.quiet_songs)
     );
     for r in rows {
         s += &format!(
-            "| {} | {:.3} | {:.3} | {:.3} | {} |\n",
-            r.system, r.beat_align, r.beat_align_other, r.beat_offset_s, r.freezes
+            "| {} | {:.3} | {:.3} | {:+.3} / {:+.3} / {:+.3} | {:.2} | {:.3} | {} |\n",
+            r.system,
+            r.beat_align,
+            r.beat_align_other,
+            r.on_minus_off[0],
+            r.on_minus_off[1],
+            r.on_minus_off[2],
+            r.quiet_speed_ratio,
+            r.beat_offset_s,
+            r.freezes
         );
     }
     s

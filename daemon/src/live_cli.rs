@@ -87,6 +87,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     let source = crate::dancer::open_source(
         kind,
         &crate::dancer::SourceSettings {
+            network_only: false,
             model: config.dancer.model.as_deref(),
             library: config.dancer.library.as_deref(),
             // Live, the accent travels with the controls (set from the configuration at start).

@@ -14,6 +14,7 @@ const SETTLE_S: f64 = 5.0;
 
 fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
     let settings = SourceSettings {
+        network_only: false,
         model: None,
         library: None,
         beat_accent: None,

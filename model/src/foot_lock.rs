@@ -80,11 +80,12 @@ impl FootLock {
 
     /// Shifts `pose` over the floor by the correction so far and, if a toe is planted, by that
     /// toe's drift since the last frame (the lower toe when both are).
-    pub fn process(&mut self, pose: &mut Pose) {
+    pub fn process(&mut self, pose: &mut Pose) -> bool {
         pose.root_position += self.offset;
         self.skeleton
             .forward_kinematics(pose, &mut self.positions, &mut self.rotations);
         let mut toes = TOES.map(|t| self.positions[t.index()]);
+        let mut moved = false;
         if self.primed {
             let mut planted: Option<(f32, Vec3)> = None;
             for (now, before) in toes.iter().zip(&self.last_toes) {
@@ -100,6 +101,7 @@ impl FootLock {
             }
             if let Some((_, drift)) = planted {
                 let drift = self.strength * drift;
+                moved = drift != Vec3::ZERO;
                 pose.root_position -= drift;
                 self.offset -= drift;
                 for t in toes.iter_mut() {
@@ -109,6 +111,7 @@ impl FootLock {
         }
         self.last_toes = toes;
         self.primed = true;
+        moved
     }
 }
 
@@ -154,13 +157,16 @@ mod tests {
         let mut pose = standing_at(&skeleton, 0.0);
         lock.process(&mut pose);
         let mut pose = standing_at(&skeleton, 0.04);
-        lock.process(&mut pose);
+        assert!(
+            lock.process(&mut pose),
+            "a planted foot's drift is taken back"
+        );
         assert!(pose.root_position.x.abs() < 1e-4);
         // In the air (toes 20 cm up) the body travels as generated, from where it was held.
         for f in 2..10 {
             let mut pose = standing_at(&skeleton, f as f32 * 0.04);
             pose.root_position.y += 0.2;
-            lock.process(&mut pose);
+            assert!(!lock.process(&mut pose), "nothing to take back in the air");
             let want = (f - 1) as f32 * 0.04;
             assert!(
                 (pose.root_position.x - want).abs() < 1e-4,

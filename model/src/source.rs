@@ -71,6 +71,11 @@ pub trait MotionSource {
     /// Starts a new performance from scratch, seeding any randomness with `seed`.
     fn reset(&mut self, seed: u64);
 
+    /// How often each of its safety nets acted since the last reset (`None`: it has none).
+    fn safety_counts(&self) -> Option<crate::neural::safety::SafetyCounts> {
+        None
+    }
+
     /// Changes the style seed mid-performance: the randomness restarts from `seed` while the
     /// dance goes on from where the dancer stands (no restart, no jump); never allocates and
     /// costs no more than a step, so it can run on the real-time thread between two steps.

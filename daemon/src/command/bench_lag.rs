@@ -291,6 +291,7 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
 /// The dancer's settings from the command line's configuration.
 fn source_settings(kind: SourceKind, config: &Config) -> SourceSettings<'_> {
     SourceSettings {
+        network_only: false,
         model: if kind == SourceKind::Neural {
             config.dancer.model.as_deref()
         } else {

@@ -40,6 +40,7 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     const NO_ACCENT: &str = "neural, no beat accent";
     const FRESH_NOISE: &str = "neural, independent noise";
     const NO_FOOT_LOCK: &str = "neural, no foot lock";
+    const NETWORK_ONLY: &str = "neural, network only";
     let started = Instant::now();
     let set = crate::eval::EvalSet::load(&o.data, o.jobs)?;
     eprintln!(
@@ -79,12 +80,20 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     let mut free_feet = crate::dancer::neural_dancer(&model, o.seed)?;
     free_feet.set_foot_lock(0.0);
     sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
+    // The network alone: every safety net off but the non-finite guard.
+    let mut alone = crate::dancer::neural_dancer(&model, o.seed)?;
+    alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
+    sources.push((NETWORK_ONLY.into(), Box::new(alone)));
     let ablation = |name: &str| [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name);
     for (name, dancer) in sources.iter_mut() {
         for t in temperatures {
             let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);
             let label = format!("{name} T={t}");
             eprintln!("{label}: {us:.1} µs per frame");
+            if let Some(c) = dancer.safety_counts() {
+                // Of the last validation song (the counts restart with each song).
+                eprintln!("  {label}, last song: {}", c.summary());
+            }
             rows.push(set.score(&label, &motions)?);
         }
     }

@@ -50,6 +50,10 @@ pub struct GenerateArgs {
     /// How long before its moment a key pose is announced to the dancer, seconds.
     #[arg(long, default_value_t = 2.0)]
     pub keypose_lead: f64,
+    /// Neural source: the network alone, every safety net off (range clamp, speed limit,
+    /// restart, beat accent, end blend, foot lock) but the non-finite guard.
+    #[arg(long)]
+    pub network_only: bool,
 }
 
 /// Runs `danced generate`.
@@ -68,6 +72,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         poses: bank_path,
         keypose_lead,
         seed_pose,
+        network_only,
     } = args;
     let (seconds, temperature, seed) = (*seconds, *temperature, *seed);
     let start = *start;
@@ -111,6 +116,9 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     if seed_pose.is_some() && kind != SourceKind::Neural {
         bail!("--seed-pose is for the neural source");
     }
+    if *network_only && kind != SourceKind::Neural {
+        bail!("--network-only is for the neural source: the retrieval dancer has no network");
+    }
     let started = Instant::now();
     let mut dancer: Box<dyn MotionSource> = match (kind, data) {
         // The full library, cut from the training split now (slow, needs ../shared).
@@ -125,6 +133,9 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             let model = crate::dancer::load_model(config.dancer.model.as_deref())?;
             let mut d = crate::dancer::neural_dancer(&model, seed)?;
             d.set_beat_accent(config.dancer.beat_accent);
+            if *network_only {
+                d.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
+            }
             if let Some(name) = seed_pose {
                 d.set_seed_pose(&crate::dancer::standing_features(
                     &bank_pose(name)?.rotations,
@@ -139,6 +150,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
                 model: config.dancer.model.as_deref(),
                 library: config.dancer.library.as_deref(),
                 beat_accent: Some(config.dancer.beat_accent),
+                network_only: *network_only,
             },
             seed,
         )?,
@@ -201,5 +213,13 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         load_s,
         1e6 * step_s / poses.len().max(1) as f64
     );
+    if let Some(c) = dancer.safety_counts() {
+        let nets = if *network_only {
+            "network only (nets off)"
+        } else {
+            "safety nets"
+        };
+        println!("{nets}: {}", c.summary());
+    }
     Ok(())
 }

@@ -19,6 +19,7 @@ use crate::motion::{
 use crate::neural::file::{FRAME_RATE, ModelFileError, NeuralModel};
 use crate::neural::rng::Rng;
 use crate::neural::runtime::Runtime;
+use crate::neural::safety::{SafetyCounts, SafetyNets};
 use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 use crate::rig::{Pose, Skeleton};
 use crate::source::{Controls, MotionSource, finite_clamp};
@@ -86,9 +87,9 @@ pub struct NeuralDancer {
     sample: Vec<f32>,
     features: [f32; MOTION_FEATURE_DIM],
     last_good: Pose,
-    bad_frames: u64,
     held_in_a_row: u32,
-    restarts: u64,
+    nets: SafetyNets,
+    counts: SafetyCounts,
     key_blend_frames: u32,
     beat_accent: f32,
     /// Pose the dancer glides from after a restart, and the frames of the glide left.
@@ -97,7 +98,6 @@ pub struct NeuralDancer {
     foot_lock: FootLock,
     previous_raw: [f32; MOTION_FEATURE_DIM],
     mean_speed_mps: f32,
-    speed_limited: u64,
     horizon_frames: usize,
 }
 
@@ -152,9 +152,9 @@ impl NeuralDancer {
             sample: vec![0.0; MOTION_FEATURE_DIM],
             features: [0.0; MOTION_FEATURE_DIM],
             last_good: Pose::rest(),
-            bad_frames: 0,
             held_in_a_row: 0,
-            restarts: 0,
+            nets: SafetyNets::SHIPPED,
+            counts: SafetyCounts::default(),
             key_blend_frames: KEY_BLEND_FRAMES,
             beat_accent: BEAT_ACCENT,
             glide_from: Pose::rest(),
@@ -166,7 +166,6 @@ impl NeuralDancer {
             ),
             previous_raw: [0.0; MOTION_FEATURE_DIM],
             mean_speed_mps: 0.0,
-            speed_limited: 0,
         };
         d.reset(0);
         Ok(d)
@@ -212,12 +211,28 @@ impl NeuralDancer {
     /// Frames since the last reset whose steps were shortened to keep the sustained speed
     /// within [`SUSTAINED_SPEED_LIMIT_MPS`].
     pub fn speed_limited_frames(&self) -> u64 {
-        self.speed_limited
+        self.counts.speed_limited
     }
 
     /// Restarts since the last reset (after [`RESTART_AFTER_HELD`] held frames in a row).
     pub fn restarts(&self) -> u64 {
-        self.restarts
+        self.counts.restarts
+    }
+
+    /// Switches the safety nets on or off ([`SafetyNets::NETWORK_ONLY`]: the network alone);
+    /// set before dancing (the foot lock's offset and the speed average carry on as they are).
+    pub fn set_safety_nets(&mut self, nets: SafetyNets) {
+        self.nets = nets;
+    }
+
+    /// The nets that are on.
+    pub fn safety_nets(&self) -> SafetyNets {
+        self.nets
+    }
+
+    /// Frames each net acted on since the last reset.
+    pub fn safety_counts(&self) -> SafetyCounts {
+        self.counts
     }
 
     /// Pushes the seed clip through the cache; the next frame continues it.
@@ -255,7 +270,7 @@ impl NeuralDancer {
         let step = self.features[ROOT_DX].hypot(self.features[ROOT_DZ]);
         let alpha = 1.0 / SPEED_AVERAGE_FRAMES;
         let mean = self.mean_speed_mps + alpha * (step * fps - self.mean_speed_mps);
-        if mean > SUSTAINED_SPEED_LIMIT_MPS && step > 0.0 {
+        if self.nets.speed_limit && mean > SUSTAINED_SPEED_LIMIT_MPS && step > 0.0 {
             // The longest step that keeps the average at the limit.
             let allowed = (self.mean_speed_mps
                 + (SUSTAINED_SPEED_LIMIT_MPS - self.mean_speed_mps) / alpha)
@@ -264,7 +279,7 @@ impl NeuralDancer {
             let k = (allowed / step).min(1.0);
             self.features[ROOT_DX] *= k;
             self.features[ROOT_DZ] *= k;
-            self.speed_limited += 1;
+            self.counts.speed_limited += 1;
         }
         let step = self.features[ROOT_DX].hypot(self.features[ROOT_DZ]);
         self.mean_speed_mps += alpha * (step * fps - self.mean_speed_mps);
@@ -278,7 +293,7 @@ impl NeuralDancer {
     /// Frames since the last reset whose output was non-finite or exploding (the last good
     /// pose was held instead).
     pub fn bad_frames(&self) -> u64 {
-        self.bad_frames
+        self.counts.held
     }
 }
 
@@ -326,13 +341,21 @@ impl MotionSource for NeuralDancer {
             *z = t * *n;
         }
         self.runtime.sample(&self.z, &mut self.sample);
+        self.counts.frames += 1;
         let good = self
             .sample
             .iter()
             .all(|v| v.is_finite() && v.abs() < EXPLODED_SIGMAS);
         if good {
-            for ((s, lo), hi) in self.sample.iter_mut().zip(&self.low).zip(&self.high) {
-                *s = s.clamp(*lo, *hi);
+            if self.nets.range_clamp {
+                let mut clamped = 0;
+                for ((s, lo), hi) in self.sample.iter_mut().zip(&self.low).zip(&self.high) {
+                    let c = s.clamp(*lo, *hi);
+                    clamped += u64::from(c != *s);
+                    *s = c;
+                }
+                self.counts.range_clamped += u64::from(clamped > 0);
+                self.counts.range_clamped_values += clamped;
             }
             self.norm.unpose(&self.sample, &mut self.features);
             let beat_cos = music
@@ -341,12 +364,16 @@ impl MotionSource for NeuralDancer {
                 .filter(|c| c.is_finite())
                 .unwrap_or(0.0);
             let accent = match controls.beat_accent {
+                _ if !self.nets.beat_accent => 0.0,
                 Some(a) => clean_accent(a),
                 None => self.beat_accent,
             };
+            self.counts.accented += u64::from(accent > 0.0);
             self.shape_motion(beat_cos, accent);
-            if let Some(ftg) = key.filter(|&f| f < self.key_blend_frames) {
-                let x = 1.0 - ftg as f32 / self.key_blend_frames as f32;
+            let blend = self.nets.key_blend.then_some(self.key_blend_frames);
+            if let Some((ftg, frames)) = key.zip(blend).filter(|&(f, n)| f < n) {
+                self.counts.key_blended += 1;
+                let x = 1.0 - ftg as f32 / frames as f32;
                 let w = x * x * (3.0 - 2.0 * x);
                 // Both are heading-free 6D rotations; the decoder re-orthonormalises the
                 // blend. Fed back too, so the network sees itself arrive.
@@ -370,22 +397,24 @@ impl MotionSource for NeuralDancer {
                 }
                 self.glide_left -= 1;
             }
-            self.foot_lock.process(out);
+            if self.nets.foot_lock && self.foot_lock.process(out) {
+                self.counts.foot_locked += 1;
+            }
             self.last_good = *out;
             self.previous.copy_from_slice(&self.sample);
             self.previous_raw = self.features;
             self.held_in_a_row = 0;
         } else {
-            self.bad_frames += 1;
+            self.counts.held += 1;
             self.held_in_a_row += 1;
             *out = self.last_good;
-            if self.held_in_a_row >= RESTART_AFTER_HELD {
+            if self.nets.restart && self.held_in_a_row >= RESTART_AFTER_HELD {
                 // A rare, one-frame cost (a window of tokens) instead of a frozen dancer.
                 self.prime();
                 self.noise.fill(0.0);
                 self.glide_from = self.last_good;
                 self.glide_left = RESTART_BLEND_FRAMES;
-                self.restarts += 1;
+                self.counts.restarts += 1;
                 self.held_in_a_row = 0;
             }
         }
@@ -401,13 +430,15 @@ impl MotionSource for NeuralDancer {
         self.norm.unpose(&self.previous, &mut self.features);
         let mut probe = MotionDecoder::new(RootState::ORIGIN);
         probe.decode_frame(&self.features, &mut self.last_good);
-        self.bad_frames = 0;
         self.held_in_a_row = 0;
-        self.restarts = 0;
+        self.counts = SafetyCounts::default();
         self.mean_speed_mps = 0.0;
-        self.speed_limited = 0;
         self.glide_left = 0;
         self.foot_lock.reset();
+    }
+
+    fn safety_counts(&self) -> Option<SafetyCounts> {
+        Some(self.counts)
     }
 
     fn reseed(&mut self, seed: u64) {
@@ -572,6 +603,49 @@ mod tests {
         }
         model.set_pose_range(&[lo, hi]);
         NeuralDancer::new(&model).unwrap()
+    }
+
+    #[test]
+    fn network_only_switches_every_net_off_and_each_net_counts_when_it_acts() {
+        let key = [glam::Quat::from_rotation_x(0.4); crate::rig::JOINT_COUNT];
+        let run = |nets: SafetyNets| {
+            let mut d = ranged_dancer(&[(ROOT_DZ, 0.2, 0.3), (ROOT_DX, 0.0, 0.0)]);
+            d.set_safety_nets(nets);
+            d.reset(4);
+            let mut pose = Pose::rest();
+            let mut music = [[0.3f32; FEATURE_DIM]; 3];
+            for (i, frame) in (0..300).enumerate() {
+                music[0][FeatureLayout::BEAT_COS] = (frame as f32 * 0.5).cos();
+                let controls = Controls {
+                    temperature: 1.0,
+                    key_pose: Some(KeyPoseTarget {
+                        rotations: key,
+                        frames_to_go: (40 - (i % 40)) as u32,
+                    }),
+                    ..Controls::default()
+                };
+                d.step(&music, &controls, &mut pose);
+                assert!(pose.is_finite());
+            }
+            d.safety_counts()
+        };
+        let shipped = run(SafetyNets::SHIPPED);
+        assert_eq!(shipped.frames, 300);
+        assert_eq!(shipped.accented, 300, "{shipped:?}");
+        assert!(shipped.speed_limited > 100, "{shipped:?}");
+        // 24 of every 40 frames are under 25 frames from the deadline (1..=24 to go), and 4
+        // of the last 20 (24..=21 to go).
+        assert_eq!(shipped.held, 0, "{shipped:?}");
+        assert_eq!(shipped.key_blended, 7 * 24 + 4, "{shipped:?}");
+        let alone = run(SafetyNets::NETWORK_ONLY);
+        assert_eq!(
+            alone,
+            SafetyCounts {
+                frames: 300,
+                held: alone.held,
+                ..SafetyCounts::default()
+            }
+        );
     }
 
     #[test]

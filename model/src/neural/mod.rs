@@ -14,5 +14,6 @@ pub mod file;
 pub mod lu;
 pub mod rng;
 pub mod runtime;
+pub mod safety;
 pub mod tensors;
 pub mod token;
