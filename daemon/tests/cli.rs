@@ -160,6 +160,43 @@ fn generate_dances_to_a_song_and_writes_bvh() {
 }
 
 #[test]
+fn network_only_switches_the_safety_nets_off_and_says_so() {
+    let dir = scratch("network-only");
+    let song = dir.join("clicks.wav");
+    let (samples, _) = common::click_track(8.0, 120.0, 0.25, 44_100);
+    common::write_wav(&song, &samples, 44_100, 2);
+    let out = dir.join("d.bvh");
+    let run = |extra: &[&str]| {
+        danced()
+            .arg("generate")
+            .arg("--audio")
+            .arg(&song)
+            .arg("--out")
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let shipped = String::from_utf8_lossy(&run(&[]).stdout).into_owned();
+    assert!(shipped.contains("safety nets: held"), "{shipped}");
+    // The shipped setting retimes the frames on the beat.
+    assert!(!shipped.contains("beat-accented 0.0 %"), "{shipped}");
+    let alone = run(&["--network-only"]);
+    let text = String::from_utf8_lossy(&alone.stdout).into_owned();
+    assert!(alone.status.success(), "{text}");
+    assert!(
+        text.contains("network only (nets off)")
+            && text.contains("range-clamped 0.0 %")
+            && text.contains("speed-limited 0.0 %, restarts 0, beat-accented 0.0 %, key-blended 0.0 %, foot-locked 0.0 %"),
+        "{text}"
+    );
+    let retrieval = run(&["--network-only", "--source", "retrieval"]);
+    assert!(!retrieval.status.success());
+    assert!(String::from_utf8_lossy(&retrieval.stderr).contains("neural source"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn the_old_train_commands_name_their_new_home() {
     for (old, new) in [("train", "dancer"), ("train-beats", "beats")] {
         let out = danced()

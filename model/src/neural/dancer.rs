@@ -32,6 +32,10 @@ pub const EXPLODED_SIGMAS: f32 = 50.0;
 /// away (hips drifting up by a metre within seconds, measured before the clamp).
 pub const RANGE_MARGIN: f32 = 0.05;
 
+/// A feature whose training range is narrower than this (raw units) is one the data holds
+/// constant.
+pub const CONSTANT_FEATURE_RANGE: f32 = 1e-3;
+
 /// Frames before a key pose's deadline over which the sampled rotations are pulled onto it
 /// (smoothstep), as the retrieval dancer does: the performer's cue lands even where the
 /// network alone would arrive late or near. 0 turns it off.
@@ -73,6 +77,9 @@ pub struct NeuralDancer {
     seed_music: Vec<f32>,
     low: Vec<f32>,
     high: Vec<f32>,
+    /// Features the training data varies (the others it holds constant: joints the fitted rig
+    /// never turns; the clamp pins those too, which is not counted as the net acting).
+    varying: Vec<bool>,
     decoder: MotionDecoder,
     rng: Rng,
     previous: Vec<f32>,
@@ -131,12 +138,16 @@ impl NeuralDancer {
         }
         norm.pose(&l, &mut low);
         norm.pose(&h, &mut high);
+        let varying = (0..MOTION_FEATURE_DIM)
+            .map(|i| hi[i] - lo[i] > CONSTANT_FEATURE_RANGE)
+            .collect();
         let mut d = NeuralDancer {
             horizon_frames: model.training.horizon_frames,
             runtime,
             norm,
             low,
             high,
+            varying,
             previous: vec![0.0; MOTION_FEATURE_DIM],
             seed_motion,
             seed_music,
@@ -349,9 +360,10 @@ impl MotionSource for NeuralDancer {
         if good {
             if self.nets.range_clamp {
                 let mut clamped = 0;
-                for ((s, lo), hi) in self.sample.iter_mut().zip(&self.low).zip(&self.high) {
+                let bounds = self.low.iter().zip(&self.high).zip(&self.varying);
+                for (s, ((lo, hi), varying)) in self.sample.iter_mut().zip(bounds) {
                     let c = s.clamp(*lo, *hi);
-                    clamped += u64::from(c != *s);
+                    clamped += u64::from(*varying && c != *s);
                     *s = c;
                 }
                 self.counts.range_clamped += u64::from(clamped > 0);

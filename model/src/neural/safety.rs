@@ -55,9 +55,10 @@ pub struct SafetyCounts {
     pub frames: u64,
     /// Frames whose sample was non-finite or exploding (the last good pose was held).
     pub held: u64,
-    /// Frames with at least one value clamped to the data's range.
+    /// Frames with at least one value clamped to the data's range (features the data holds
+    /// constant are pinned too but not counted).
     pub range_clamped: u64,
-    /// Values clamped (of `frames` × the pose features).
+    /// Values clamped (of `frames` × the pose features), constant features not counted.
     pub range_clamped_values: u64,
     /// Frames whose step over the floor was shortened.
     pub speed_limited: u64,
