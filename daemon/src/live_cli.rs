@@ -253,7 +253,7 @@ pub fn summary(r: &StatsReport) -> String {
          queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
          packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
          controls     {} applied, {} rejected, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
-         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}",
+         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}{}",
         r.wall_s,
         r.frames_sent,
         r.frames_sent as f64 / r.wall_s.max(1e-9),
@@ -317,6 +317,9 @@ pub fn summary(r: &StatsReport) -> String {
         r.midi_bytes_dropped,
         r.midi_skipped,
         r.midi_queue_full,
+        r.safety_nets
+            .map(|c| format!("\nsafety nets  {}", c.summary()))
+            .unwrap_or_default(),
         r.view
             .map(|v| view_summary(&v, r.wall_s))
             .unwrap_or_default(),

@@ -186,7 +186,7 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
         motion: counted.motion - after.motion,
         sender: counted.sender - after.sender,
     };
-    for run in &runs {
+    for (run, source) in runs.iter().zip(["neural", "retrieval"]) {
         let r = &run.report;
         // The report carries the same per-thread counts (process-wide, so they include the
         // deliberate allocations above).
@@ -221,6 +221,12 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
             "vrchat {:?}",
             run.received
         );
+        // The neural dancer's safety nets are reported (the retrieval dancer has none).
+        match (source, r.safety_nets) {
+            ("neural", Some(c)) => assert!(c.frames as f64 > 20.0 * (r.wall_s - 1.0), "{c:?}"),
+            ("retrieval", None) => {}
+            (s, c) => panic!("{s}: safety nets {c:?}"),
+        }
         // The view took the frames (no browser connected: taken from the slot, not sent).
         let view = r.view.expect("the view ran");
         assert_eq!(view.events_dropped, 0, "{view:?}");

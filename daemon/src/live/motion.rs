@@ -208,6 +208,9 @@ pub fn run(
             .processing
             .record_s(now_ns.saturating_sub(msg.ingest_wall_ns) as f64 * 1e-9);
         stats.model_frames.fetch_add(1, Ordering::Relaxed);
+        if let Some(c) = source.safety_counts() {
+            stats.safety.store(&c);
+        }
         next_time = t + 1.0 / rate;
         window.remove(0);
         times.remove(0);

@@ -25,6 +25,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use serde::Serialize;
 
 use crate::alloc_counter::RtThread;
+use model::neural::safety::SafetyCounts;
 
 /// Allocations (and frees) counted per real-time thread since the process started.
 #[derive(Clone, Copy, Debug, Default, Serialize, PartialEq, Eq)]
@@ -232,6 +233,8 @@ pub struct Stats {
     pub key_pose_index: AtomicU32,
     /// 1 while paused.
     pub paused: AtomicU32,
+    /// What the dancer's safety nets did (neural dancer only).
+    pub safety: SafetyGauges,
     rss: Mutex<Vec<(f64, u64)>>,
 }
 
@@ -284,6 +287,7 @@ impl Stats {
             key_pose_state: AtomicU32::new(KEY_POSE_NONE),
             key_pose_frames_to_go: AtomicU32::new(0),
             key_pose_index: AtomicU32::new(0),
+            safety: SafetyGauges::default(),
             paused: AtomicU32::new(0),
             // One sample a second: two hours before this ever grows.
             rss: Mutex::new(Vec::with_capacity(7200)),
@@ -382,8 +386,57 @@ impl Stats {
             midi_bytes_dropped: 0,
             midi_skipped: 0,
             midi_queue_full: 0,
+            safety_nets: self.safety.load(),
             view: None,
         }
+    }
+}
+
+/// The dancer's [`SafetyCounts`], published by the motion thread after each step.
+#[derive(Debug, Default)]
+pub struct SafetyGauges {
+    /// Whether the dancer has safety nets at all.
+    pub present: AtomicU32,
+    values: [AtomicU64; 9],
+}
+
+impl SafetyGauges {
+    /// Publishes `c` (a few relaxed stores; no allocation).
+    pub fn store(&self, c: &SafetyCounts) {
+        self.present.store(1, Ordering::Relaxed);
+        let v = [
+            c.frames,
+            c.held,
+            c.range_clamped,
+            c.range_clamped_values,
+            c.speed_limited,
+            c.restarts,
+            c.accented,
+            c.key_blended,
+            c.foot_locked,
+        ];
+        for (a, x) in self.values.iter().zip(v) {
+            a.store(x, Ordering::Relaxed);
+        }
+    }
+
+    /// The counts last published, if the dancer has nets.
+    pub fn load(&self) -> Option<SafetyCounts> {
+        if self.present.load(Ordering::Relaxed) == 0 {
+            return None;
+        }
+        let v = self.values.each_ref().map(|a| a.load(Ordering::Relaxed));
+        Some(SafetyCounts {
+            frames: v[0],
+            held: v[1],
+            range_clamped: v[2],
+            range_clamped_values: v[3],
+            speed_limited: v[4],
+            restarts: v[5],
+            accented: v[6],
+            key_blended: v[7],
+            foot_locked: v[8],
+        })
     }
 }
 
@@ -503,6 +556,9 @@ pub struct StatsReport {
     pub midi_skipped: u64,
     /// MIDI messages lost because the queue from the MIDI driver's thread was full.
     pub midi_queue_full: u64,
+    /// What the dancer's safety nets did (neural dancer only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety_nets: Option<SafetyCounts>,
     /// The browser view's counters, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub view: Option<crate::view::ViewReport>,

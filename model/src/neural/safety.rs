@@ -49,7 +49,7 @@ impl Default for SafetyNets {
 }
 
 /// Frames each net acted on since the last reset.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct SafetyCounts {
     /// Frames stepped.
     pub frames: u64,
