@@ -80,12 +80,104 @@ pub struct EvalSet {
     train_positions: Vec<Vec<glam::Vec3>>,
     /// Training kinetic features (5 s windows).
     train_kinetic: Vec<Vec<f64>>,
+    /// Training kinetic features of [`TRANSITION_S`] windows.
+    train_kinetic_short: Vec<Vec<f64>>,
+    /// The style classifier fit on the training dances.
+    styles: Option<StyleClassifier>,
+}
+
+/// The tang2018 styles, in the order of its dance names' letters (C, R, T, W).
+pub const STYLES: [&str; 4] = ["cha-cha", "rumba", "tango", "waltz"];
+
+/// Length of the windows the style classifier names, seconds.
+pub const STYLE_WINDOW_S: f64 = 10.0;
+
+/// The style of a tang2018 dance by its name (`DANCE_W_3` is a waltz).
+pub fn style_of(dance: &str) -> Option<usize> {
+    match dance.strip_prefix("DANCE_")?.chars().next()? {
+        'C' => Some(0),
+        'R' => Some(1),
+        'T' => Some(2),
+        'W' => Some(3),
+        _ => None,
+    }
+}
+
+/// Nearest centroid on standardised kinetic features of [`STYLE_WINDOW_S`] windows, fit on
+/// the training dances: a simple, fixed judge of which style a motion looks like.
+pub struct StyleClassifier {
+    norm: model::metrics::FeatureNormaliser,
+    centroids: Vec<(usize, Vec<f64>)>,
+}
+
+impl StyleClassifier {
+    /// Fits the centroids of `windows` (style, kinetic features).
+    pub fn fit(windows: &[(usize, Vec<f64>)]) -> Option<Self> {
+        let all: Vec<Vec<f64>> = windows.iter().map(|w| w.1.clone()).collect();
+        let norm = model::metrics::FeatureNormaliser::fit(&all).ok()?;
+        let mut centroids = Vec::new();
+        for style in 0..STYLES.len() {
+            let members: Vec<Vec<f64>> = windows
+                .iter()
+                .filter(|w| w.0 == style)
+                .filter_map(|w| norm.apply(&w.1).ok())
+                .collect();
+            if let Some(first) = members.first() {
+                let mut c = vec![0.0; first.len()];
+                for m in &members {
+                    for (c, x) in c.iter_mut().zip(m) {
+                        *c += x / members.len() as f64;
+                    }
+                }
+                centroids.push((style, c));
+            }
+        }
+        (!centroids.is_empty()).then_some(Self { norm, centroids })
+    }
+
+    /// The style `features` are nearest to.
+    pub fn classify(&self, features: &[f64]) -> Option<usize> {
+        let x = self.norm.apply(features).ok()?;
+        self.centroids
+            .iter()
+            .map(|(s, c)| {
+                let d: f64 = c.iter().zip(&x).map(|(a, b)| (a - b).powi(2)).sum();
+                (*s, d)
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(s, _)| s)
+    }
+
+    /// Styles in the classifier (those with training windows).
+    pub fn styles(&self) -> Vec<usize> {
+        self.centroids.iter().map(|c| c.0).collect()
+    }
+}
+
+/// Length of the windows before a key pose whose kinetics are compared with free dancing, s.
+pub const TRANSITION_S: f64 = 2.0;
+
+/// FID_k of the motion leading into key poses and of free dancing, on [`TRANSITION_S`] windows
+/// against the training dances' windows of that length.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TransitionFid {
+    /// The windows ending on a key pose's target frame (announced [`TRANSITION_S`] ahead).
+    pub before_key: f64,
+    /// Windows of the same dances with no key pose announced (ending halfway between cues).
+    pub free: f64,
+    /// Windows of each kind.
+    pub windows: usize,
 }
 
 /// Kinetic features of every whole 5 s window of a track's positions.
 fn window_kinetics(positions: &[glam::Vec3]) -> Vec<Vec<f64>> {
+    windows_of(positions, KINETIC_WINDOW_FRAMES)
+}
+
+/// Kinetic features of every whole window of `frames` frames of a track's positions.
+fn windows_of(positions: &[glam::Vec3], frames: usize) -> Vec<Vec<f64>> {
     positions
-        .chunks_exact(KINETIC_WINDOW_FRAMES * JOINT_COUNT)
+        .chunks_exact(frames * JOINT_COUNT)
         .filter_map(|w| {
             let t = JointTrack::new(w, JOINT_COUNT, TANG_FPS).ok()?;
             kinetic_features(&t).ok()
@@ -102,12 +194,22 @@ impl EvalSet {
             validation: Vec::new(),
             train_positions: Vec::new(),
             train_kinetic: Vec::new(),
+            train_kinetic_short: Vec::new(),
+            styles: None,
         };
+        let mut style_windows = Vec::new();
+        let style_frames = (STYLE_WINDOW_S * TANG_FPS) as usize;
         for b in built.into_iter().filter_map(|(_, r)| r.ok()) {
             let poses = b.poses_on_default_rig();
             if !b.validation {
                 let p = skeleton.trajectory(&poses);
                 set.train_kinetic.extend(window_kinetics(&p));
+                set.train_kinetic_short
+                    .extend(windows_of(&p, (TRANSITION_S * TANG_FPS) as usize));
+                if let Some(style) = style_of(&b.name) {
+                    style_windows
+                        .extend(windows_of(&p, style_frames).into_iter().map(|w| (style, w)));
+                }
                 set.train_positions.push(p);
                 continue;
             }
@@ -127,6 +229,7 @@ impl EvalSet {
                     .collect(),
             });
         }
+        set.styles = StyleClassifier::fit(&style_windows);
         anyhow::ensure!(
             !set.validation.is_empty() && set.train_positions.len() >= 2,
             "the evaluation needs validation and training dances with music under {}",
@@ -257,6 +360,74 @@ impl EvalSet {
             }
         }
         (sum / count.max(1) as f64, count)
+    }
+
+    /// How the motion leading into key poses (announced [`TRANSITION_S`] ahead, cues as in
+    /// [`EvalSet::key_pose_error`]) compares with free dancing: FID_k of both kinds of window.
+    pub fn transition_fid(
+        &self,
+        source: &mut dyn MotionSource,
+        temperature: f32,
+        seed: u64,
+        bank: &[[Quat; JOINT_COUNT]],
+    ) -> Result<TransitionFid> {
+        let len = (TRANSITION_S * TANG_FPS).round() as usize;
+        let spacing = (KEY_CUE_SPACING_S * TANG_FPS).round() as usize;
+        let skeleton = Skeleton::default_adult();
+        let (mut before, mut free) = (Vec::new(), Vec::new());
+        for (i, d) in self.validation.iter().enumerate() {
+            let frames = d.music.len().saturating_sub(source.lookahead_frames());
+            let cues: Vec<KeyCue> = (0..)
+                .map(|k| spacing / 2 + k * spacing)
+                .take_while(|&f| f < frames)
+                .enumerate()
+                .map(|(k, frame)| KeyCue {
+                    name: String::new(),
+                    rotations: bank[(i * 5 + k) % bank.len()],
+                    frame,
+                })
+                .collect();
+            let motion = dance_to(source, &d.music, frames, temperature, seed, &cues, len);
+            let p = skeleton.trajectory(&motion);
+            let window = |end: usize| {
+                let from = (end + 1).checked_sub(len)?;
+                let w = p.get(from * JOINT_COUNT..(end + 1) * JOINT_COUNT)?;
+                kinetic_features(&JointTrack::new(w, JOINT_COUNT, TANG_FPS).ok()?).ok()
+            };
+            for c in &cues {
+                // Halfway to the next cue nothing has been announced for 2 s or more.
+                let (b, f) = (window(c.frame), window(c.frame + spacing / 2));
+                if let (Some(b), Some(f)) = (b, f) {
+                    before.push(b);
+                    free.push(f);
+                }
+            }
+        }
+        Ok(TransitionFid {
+            before_key: fid_k(&self.train_kinetic_short, &before)?,
+            free: fid_k(&self.train_kinetic_short, &free)?,
+            windows: before.len(),
+        })
+    }
+
+    /// The style classifier's names for every [`STYLE_WINDOW_S`] window of `motions` (one per
+    /// validation dance): `confusion[song's style][named style]`, windows counted.
+    pub fn style_confusion(&self, motions: &[Vec<Pose>]) -> Option<[[usize; 4]; 4]> {
+        let classifier = self.styles.as_ref()?;
+        let skeleton = Skeleton::default_adult();
+        let mut confusion = [[0usize; 4]; 4];
+        for (m, d) in motions.iter().zip(&self.validation) {
+            let Some(style) = style_of(&d.name) else {
+                continue;
+            };
+            let p = skeleton.trajectory(m);
+            for w in windows_of(&p, (STYLE_WINDOW_S * TANG_FPS) as usize) {
+                if let Some(named) = classifier.classify(&w) {
+                    confusion[style][named] += 1;
+                }
+            }
+        }
+        Some(confusion)
     }
 
     /// Freezes in [`LONG_RUN_S`] of dancing to every validation song, its music looped.
@@ -538,6 +709,28 @@ pub fn retrieval(library: ClipLibrary) -> Result<RetrievalDancer> {
     RetrievalDancer::new(library, 1).context("starting the retrieval dancer")
 }
 
+/// A style confusion matrix as a table, with the share named right.
+pub fn style_table(system: &str, confusion: &[[usize; 4]; 4]) -> String {
+    let mut s = format!(
+        "| {system}: song's style ↓, named → | {} | named right |\n| --- |{}\n",
+        STYLES.join(" | "),
+        " --- |".repeat(STYLES.len() + 1)
+    );
+    for (style, row) in confusion.iter().enumerate() {
+        let total: usize = row.iter().sum();
+        if total == 0 {
+            continue;
+        }
+        s += &format!(
+            "| {} | {} | {:.0} % |\n",
+            STYLES[style],
+            row.map(|n| n.to_string()).join(" | "),
+            100.0 * row[style] as f64 / total as f64
+        );
+    }
+    s
+}
+
 /// The table `danced eval` prints.
 pub fn table(rows: &[EvalRow]) -> String {
     let mut s = String::from(
@@ -559,4 +752,40 @@ pub fn table(rows: &[EvalRow]) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn styles_come_from_the_dance_names() {
+        assert_eq!(style_of("DANCE_C_2"), Some(0));
+        assert_eq!(style_of("DANCE_W_31"), Some(3));
+        assert_eq!(style_of("DANCE_T_5").map(|s| STYLES[s]), Some("tango"));
+        assert_eq!(style_of("DANCE_X_1"), None);
+        assert_eq!(style_of("song"), None);
+    }
+
+    #[test]
+    fn the_style_judge_names_the_nearest_centroid() {
+        // Two styles far apart on the first feature, close on the second.
+        let windows: Vec<(usize, Vec<f64>)> = (0..10)
+            .flat_map(|i| {
+                let j = i as f64 * 0.01;
+                [(1, vec![0.0 + j, 1.0 - j]), (3, vec![5.0 + j, 1.0 + j])]
+            })
+            .collect();
+        let c = StyleClassifier::fit(&windows).unwrap();
+        assert_eq!(c.styles(), vec![1, 3]);
+        assert_eq!(c.classify(&[0.4, 1.0]), Some(1));
+        assert_eq!(c.classify(&[4.2, 1.05]), Some(3));
+        // Standardised: the tight second feature outweighs the spread first one.
+        assert_eq!(c.classify(&[4.2, 0.93]), Some(1));
+        let mut confusion = [[0usize; 4]; 4];
+        confusion[3] = [0, 2, 0, 6];
+        let t = style_table("x", &confusion);
+        assert!(t.contains("| waltz | 0 | 2 | 0 | 6 | 75 % |"), "{t}");
+        assert!(!t.lines().any(|l| l.starts_with("| cha-cha |")), "{t}");
+    }
 }

@@ -50,6 +50,7 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     );
     let gt = set.ground_truth();
     let mut rows = vec![set.score("ground truth", &gt)?];
+    let mut styled = vec![("ground truth".to_string(), gt.clone())];
     let mut libraries = vec![(
         "retrieval",
         crate::dancer::load_library(o.library.as_deref())?.0,
@@ -95,9 +96,19 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
                 eprintln!("  {label}, last song: {}", c.summary());
             }
             rows.push(set.score(&label, &motions)?);
+            if t == 0.5 && (name == "neural" || name == "retrieval" || name == NETWORK_ONLY) {
+                styled.push((label.clone(), motions.clone()));
+            }
         }
     }
     print!("{}", crate::eval::table(&rows));
+    // Which style each 10 s window looks like, by a nearest-centroid judge fit on the
+    // training dances (no dancer takes a style input yet: the rows are the song's style).
+    for (label, motions) in &styled {
+        if let Some(c) = set.style_confusion(motions) {
+            print!("\n{}", crate::eval::style_table(label, &c));
+        }
+    }
     if o.quick {
         eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
         return Ok(());
@@ -137,6 +148,25 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         }
     }
     print!("{key_table}");
+    // Transitions: the 2 s leading into a key pose against 2 s of free dancing.
+    println!(
+        "\n| system | FID_k of the {} s before key poses ↓ | of free dancing ↓ | ratio (target ≤ 1.25) | windows |\n| --- | --- | --- | --- | --- |",
+        crate::eval::TRANSITION_S
+    );
+    for (name, dancer) in sources
+        .iter_mut()
+        .filter(|(n, _)| !n.contains("full") && !ablation(n))
+    {
+        let t = 0.5;
+        let f = set.transition_fid(dancer.as_mut(), t, o.seed, &bank)?;
+        println!(
+            "| {name} T={t} | {:.1} | {:.1} | {:.2} | {} |",
+            f.before_key,
+            f.free,
+            f.before_key / f.free,
+            f.windows
+        );
+    }
     // Long runs: no freeze over five minutes on any song.
     println!(
         "\n| system | freezes in {:.0} min on each validation song (looped) | songs with a freeze |\n| --- | --- | --- |",
