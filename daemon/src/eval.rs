@@ -337,20 +337,10 @@ impl EvalSet {
         horizon_s: f64,
     ) -> (f64, usize) {
         let lead = (horizon_s * TANG_FPS).round() as usize;
-        let spacing = (KEY_CUE_SPACING_S * TANG_FPS).round() as usize;
         let (mut sum, mut count) = (0.0, 0usize);
         for (i, d) in self.validation.iter().enumerate() {
             let frames = d.music.len().saturating_sub(source.lookahead_frames());
-            let cues: Vec<KeyCue> = (0..)
-                .map(|k| spacing / 2 + k * spacing)
-                .take_while(|&f| f < frames)
-                .enumerate()
-                .map(|(k, frame)| KeyCue {
-                    name: String::new(),
-                    rotations: bank[(i * 5 + k) % bank.len()],
-                    frame,
-                })
-                .collect();
+            let cues = key_cues(i, frames, bank);
             let motion = dance_to(source, &d.music, frames, temperature, seed, &cues, lead);
             for c in &cues {
                 if let Some(p) = motion.get(c.frame) {
@@ -377,16 +367,7 @@ impl EvalSet {
         let (mut before, mut free) = (Vec::new(), Vec::new());
         for (i, d) in self.validation.iter().enumerate() {
             let frames = d.music.len().saturating_sub(source.lookahead_frames());
-            let cues: Vec<KeyCue> = (0..)
-                .map(|k| spacing / 2 + k * spacing)
-                .take_while(|&f| f < frames)
-                .enumerate()
-                .map(|(k, frame)| KeyCue {
-                    name: String::new(),
-                    rotations: bank[(i * 5 + k) % bank.len()],
-                    frame,
-                })
-                .collect();
+            let cues = key_cues(i, frames, bank);
             let motion = dance_to(source, &d.music, frames, temperature, seed, &cues, len);
             let p = skeleton.trajectory(&motion);
             let window = |end: usize| {
@@ -452,6 +433,22 @@ impl EvalSet {
         }
         Ok(run)
     }
+}
+
+/// The key-pose cues of validation song `song` (`frames` long): a pose of `bank`, in turn,
+/// every [`KEY_CUE_SPACING_S`] from [`KEY_CUE_SPACING_S`] / 2 on.
+fn key_cues(song: usize, frames: usize, bank: &[[Quat; JOINT_COUNT]]) -> Vec<KeyCue> {
+    let spacing = (KEY_CUE_SPACING_S * TANG_FPS).round() as usize;
+    (0..)
+        .map(|k| spacing / 2 + k * spacing)
+        .take_while(|&f| f < frames)
+        .enumerate()
+        .map(|(k, frame)| KeyCue {
+            name: String::new(),
+            rotations: bank[(song * 5 + k) % bank.len()],
+            frame,
+        })
+        .collect()
 }
 
 /// Seconds between key poses in the key-pose evaluation.
