@@ -296,6 +296,24 @@ pub fn decode(features: &[MotionFeatures], start: RootState, out: &mut Vec<Pose>
     }
 }
 
+/// The frame of the mirror-image dance: left and right swapped, as if seen in a mirror facing
+/// the dancer (the reflection x → −x of our coordinates). Sideways steps and turns change
+/// sign; each joint's rotation `R` becomes `M R M` (`M` = diag(−1, 1, 1)) on the opposite
+/// joint, which on a 6D rotation (the images of +X and +Y) is `(x, −y, −z)` for the first
+/// column and `(−x, y, z)` for the second. Data augmentation: a mirrored dance is a dance.
+pub fn mirror_features(f: &MotionFeatures) -> MotionFeatures {
+    let mut out = *f;
+    out[ROOT_DX] = -f[ROOT_DX];
+    out[ROOT_DFACING] = -f[ROOT_DFACING];
+    for joint in Joint::ALL {
+        let from = rotation_offset(joint);
+        let to = rotation_offset(joint.mirror());
+        let c = &f[from..from + ROTATION_DIM];
+        out[to..to + ROTATION_DIM].copy_from_slice(&[c[0], -c[1], -c[2], -c[3], c[4], c[5]]);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -605,6 +623,56 @@ mod tests {
             let mut again = Vec::new();
             encode(&motion, &mut again);
             assert_features_close(&f, &again);
+        }
+    }
+
+    #[test]
+    fn mirrored_features_are_the_features_of_the_mirrored_dance() {
+        use crate::rig::to_unity_rotation;
+        let mut rng = 7u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((rng >> 33) as f32 / (1u64 << 31) as f32) - 0.5
+        };
+        let mut poses = Vec::new();
+        let mut pose = Pose::rest();
+        for f in 0..20 {
+            pose.root_position =
+                glam::Vec3::new(0.1 * f as f32 + next(), 0.9 + 0.1 * next(), next());
+            for j in Joint::ALL {
+                let axis = glam::Vec3::new(next(), next(), next()).normalize_or_zero();
+                pose.set_rotation(j, Quat::from_axis_angle(axis, 2.0 * next()));
+            }
+            poses.push(pose);
+        }
+        // The mirror image: x → −x, each rotation conjugated by the reflection, sides swapped.
+        let mirrored: Vec<Pose> = poses
+            .iter()
+            .map(|p| {
+                let mut m = *p;
+                m.root_position.x = -p.root_position.x;
+                for j in Joint::ALL {
+                    m.set_rotation(j.mirror(), to_unity_rotation(p.rotation(j)));
+                }
+                m
+            })
+            .collect();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        encode(&poses, &mut a);
+        encode(&mirrored, &mut b);
+        for (i, (fa, fb)) in a.iter().zip(&b).enumerate() {
+            let m = mirror_features(fa);
+            for k in 0..MOTION_FEATURE_DIM {
+                assert!(
+                    (m[k] - fb[k]).abs() < 1e-4,
+                    "frame {i} feature {k}: {} vs {}",
+                    m[k],
+                    fb[k]
+                );
+            }
+            assert_eq!(mirror_features(&m), *fa, "an involution");
         }
     }
 }

@@ -53,6 +53,10 @@ pub struct TrainArgs {
     /// 0.3 measured no better: the key input stayed unused and FID_k rose).
     #[arg(long, default_value_t = 0.0)]
     pub music_drop: f64,
+    /// Also train on every training dance's mirror image (left and right swapped; the same
+    /// music), doubling the data.
+    #[arg(long)]
+    pub mirror: bool,
     /// Fraction of sequences trained without a key pose.
     #[arg(long, default_value_t = 0.3)]
     pub key_drop: f64,
@@ -110,7 +114,16 @@ fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
 pub fn train(args: &TrainArgs) -> Result<()> {
     let started_loading = Instant::now();
     let dances = on_default_rig(load_dances(&args.data, args.jobs)?);
-    let train_pairs = pairs(&dances, false);
+    let mut train_pairs = pairs(&dances, false);
+    let mirrored: Vec<(Vec<[f32; MOTION_FEATURE_DIM]>, &[[f32; FEATURE_DIM]])> = if args.mirror {
+        train_pairs
+            .iter()
+            .map(|(m, a)| (m.iter().map(model::motion::mirror_features).collect(), *a))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    train_pairs.extend(mirrored.iter().map(|(m, a)| (&m[..], *a)));
     let train_names: Vec<String> = dances
         .iter()
         .filter(|d| !d.validation)
@@ -193,8 +206,13 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     model.training.seed = args.seed;
     model.training.horizon_frames = daemon::horizon::data_horizon(model::tang2018::TANG_FPS);
     model.training.data = format!(
-        "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig: {}",
+        "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig{}: {}",
         daemon::dataset::DATASET_VERSION,
+        if args.mirror {
+            ", with their mirror images"
+        } else {
+            ""
+        },
         train_names.join(" ")
     );
     let recipe = format!(
@@ -207,7 +225,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         args.key_drop,
         args.input_noise,
         args.music_drop
-    );
+    ) + if args.mirror { " --mirror" } else { "" };
     model.training.recipe = if previous.recipe.is_empty() {
         recipe
     } else {
