@@ -83,6 +83,9 @@ fn load_dances(data: &Path, jobs: usize) -> Result<Vec<BuiltDance>> {
     Ok(built)
 }
 
+/// A training dance's mirror image (owned motion) with the dance's music.
+type MirroredDance<'a> = (Vec<[f32; MOTION_FEATURE_DIM]>, &'a [[f32; FEATURE_DIM]]);
+
 /// A dance's motion and its frame-aligned music.
 type DancePair<'a> = (&'a [[f32; MOTION_FEATURE_DIM]], &'a [[f32; FEATURE_DIM]]);
 
@@ -115,7 +118,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let started_loading = Instant::now();
     let dances = on_default_rig(load_dances(&args.data, args.jobs)?);
     let mut train_pairs = pairs(&dances, false);
-    let mirrored: Vec<(Vec<[f32; MOTION_FEATURE_DIM]>, &[[f32; FEATURE_DIM]])> = if args.mirror {
+    let mirrored: Vec<MirroredDance> = if args.mirror {
         train_pairs
             .iter()
             .map(|(m, a)| (m.iter().map(model::motion::mirror_features).collect(), *a))
