@@ -84,6 +84,58 @@ fn sorted_dir(dir: &Path) -> Vec<PathBuf> {
     v
 }
 
+/// What a rendered song's JSON (written beside it by `synth_beats.py`) says of it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SynthSongInfo {
+    /// Tempo at the start, BPM.
+    pub bpm: f64,
+    /// Whether the tempo stays constant.
+    pub constant: bool,
+    /// Bars before the drums come in.
+    pub drumless_intro_bars: f64,
+    /// Time of the first beat, seconds.
+    pub first_beat_s: f64,
+    /// Beats in a bar.
+    pub beats_per_bar: f64,
+    /// The quiet section, seconds, if any.
+    pub quiet: Option<(f64, f64)>,
+    /// Where the tempo jumps, for songs that have a jump.
+    pub tempo_change_s: Option<f64>,
+}
+
+impl SynthSongInfo {
+    /// Reads the JSON beside `audio` (`None` if it is missing or says no tempo).
+    pub fn read(audio: &Path) -> Option<Self> {
+        let json = std::fs::read_to_string(audio.with_extension("json")).ok()?;
+        let v: serde_json::Value = serde_json::from_str(&json).ok()?;
+        let q = &v["quiet_section"];
+        Some(Self {
+            bpm: v["tempo_start_bpm"].as_f64()?,
+            constant: v["tempo_curve"].as_str() == Some("constant"),
+            drumless_intro_bars: v["drumless_intro_bars"].as_f64().unwrap_or(0.0),
+            first_beat_s: v["first_beat_s"].as_f64().unwrap_or(0.0),
+            beats_per_bar: v["beats_per_bar"].as_f64().unwrap_or(4.0),
+            quiet: q["start_s"].as_f64().zip(q["end_s"].as_f64()),
+            tempo_change_s: v["tempo_change_s"].as_f64(),
+        })
+    }
+
+    /// Whether it starts without drums.
+    pub fn has_intro(&self) -> bool {
+        self.drumless_intro_bars > 0.0
+    }
+
+    /// Its quiet section and drumless intro, seconds.
+    pub fn quiet_parts(&self) -> Vec<(f64, f64)> {
+        let mut parts: Vec<(f64, f64)> = self.quiet.into_iter().collect();
+        if self.has_intro() {
+            let bars_s = self.drumless_intro_bars * self.beats_per_bar * 60.0 / self.bpm;
+            parts.push((0.0, self.first_beat_s + bars_s));
+        }
+        parts
+    }
+}
+
 /// The rendered songs with exact beats in `data/synth-beats`.
 pub fn synth_set(data: &Path) -> BenchSet {
     let mut items = Vec::new();

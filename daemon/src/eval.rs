@@ -540,25 +540,6 @@ pub struct MusicRow {
     pub songs: usize,
 }
 
-/// What a `synth-beats` song's JSON says of its tempo and quiet parts.
-fn song_facts(audio: &Path) -> Option<(f64, Vec<(f64, f64)>)> {
-    let json = std::fs::read_to_string(audio.with_extension("json")).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&json).ok()?;
-    let bpm = v["tempo_start_bpm"].as_f64()?;
-    let mut quiet = Vec::new();
-    let q = &v["quiet_section"];
-    if let Some(span) = q["start_s"].as_f64().zip(q["end_s"].as_f64()) {
-        quiet.push(span);
-    }
-    let intro_bars = v["drumless_intro_bars"].as_f64().unwrap_or(0.0);
-    if intro_bars > 0.0 {
-        let first = v["first_beat_s"].as_f64().unwrap_or(0.0);
-        let per_bar = v["beats_per_bar"].as_f64().unwrap_or(4.0);
-        quiet.push((0.0, first + intro_bars * per_bar * 60.0 / bpm));
-    }
-    Some((bpm, quiet))
-}
-
 /// Mean joint speed (m/s) in frames inside `spans` and outside them, skipping the first 2 s.
 fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64, f64) {
     let fps = TANG_FPS;
@@ -604,7 +585,8 @@ impl MusicSet {
                 &mut |_, _| {},
             )
             .with_context(|| format!("analysing {}", item.audio.display()))?;
-            let (bpm, quiet) = song_facts(&item.audio).unwrap_or((0.0, Vec::new()));
+            let (bpm, quiet) = crate::bench::SynthSongInfo::read(&item.audio)
+                .map_or((0.0, Vec::new()), |i| (i.bpm, i.quiet_parts()));
             let off_beats = item.beats.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
             songs.push(MusicSong {
                 features: dsp::predicted_stream(

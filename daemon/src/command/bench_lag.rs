@@ -100,28 +100,8 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
         .collect()
 }
 
-/// What a song's JSON says of it.
-struct SongInfo {
-    bpm: f64,
-    constant: bool,
-    intro: bool,
-    /// The quiet section, seconds, if any.
-    quiet: Option<(f64, f64)>,
-    /// Where the tempo jumps, for songs that have a jump.
-    tempo_change_s: Option<f64>,
-}
-
-fn song_info(item: &crate::bench::BenchItem) -> Option<SongInfo> {
-    let json = std::fs::read_to_string(item.audio.with_extension("json")).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&json).ok()?;
-    let q = &v["quiet_section"];
-    Some(SongInfo {
-        bpm: v["tempo_start_bpm"].as_f64()?,
-        constant: v["tempo_curve"].as_str() == Some("constant"),
-        intro: v["drumless_intro_bars"].as_u64().unwrap_or(0) > 0,
-        quiet: q["start_s"].as_f64().zip(q["end_s"].as_f64()),
-        tempo_change_s: v["tempo_change_s"].as_f64(),
-    })
+fn song_info(item: &crate::bench::BenchItem) -> Option<crate::bench::SynthSongInfo> {
+    crate::bench::SynthSongInfo::read(&item.audio)
 }
 
 /// The set's constant-tempo songs without a drumless intro, 70–170 BPM, slowest first.
@@ -131,7 +111,7 @@ fn steady_songs(set: &crate::bench::BenchSet) -> Vec<(f64, &crate::bench::BenchI
         .iter()
         .filter_map(|i| {
             let info = song_info(i)?;
-            (info.constant && !info.intro && (70.0..=170.0).contains(&info.bpm))
+            (info.constant && !info.has_intro() && (70.0..=170.0).contains(&info.bpm))
                 .then_some((info.bpm, i))
         })
         .collect();
