@@ -172,6 +172,11 @@ impl ControlParser {
         self.bad_arguments
     }
 
+    /// Everything it did not take: malformed packets, unknown addresses and bad arguments.
+    pub fn ignored(&self) -> u64 {
+        self.malformed + self.unknown_address + self.bad_arguments
+    }
+
     /// Appends the events in one UDP datagram to `out`; returns how many were appended.
     pub fn parse(&mut self, packet: &[u8], out: &mut Vec<ControlEvent>) -> usize {
         let before = out.len();

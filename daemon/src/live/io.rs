@@ -195,10 +195,7 @@ impl ControlInputs {
                             }
                             let p = receiver.parser();
                             counters.osc_accepted.store(p.accepted(), Ordering::Relaxed);
-                            counters.osc_ignored.store(
-                                p.malformed() + p.unknown_address() + p.bad_arguments(),
-                                Ordering::Relaxed,
-                            );
+                            counters.osc_ignored.store(p.ignored(), Ordering::Relaxed);
                             counters
                                 .osc_refused_sources
                                 .store(receiver.refused_sources(), Ordering::Relaxed);

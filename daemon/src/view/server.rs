@@ -437,10 +437,9 @@ impl ViewThread {
         self.counters
             .controls_accepted
             .store(self.parser.accepted(), Ordering::Relaxed);
-        self.counters.controls_ignored.store(
-            self.parser.malformed() + self.parser.unknown_address() + self.parser.bad_arguments(),
-            Ordering::Relaxed,
-        );
+        self.counters
+            .controls_ignored
+            .store(self.parser.ignored(), Ordering::Relaxed);
         self.remove(&gone);
     }
 
