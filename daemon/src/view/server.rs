@@ -337,11 +337,14 @@ impl ViewThread {
                 }
             }
             while let Ok(e) = self.events.pop() {
-                let bytes = native.encode_event(&e).to_vec();
-                self.broadcast(&[Message::binary(bytes)], false, now);
+                // Taken either way (the queue must not fill), encoded only for someone.
+                if !self.clients.is_empty() {
+                    let bytes = native.encode_event(&e).to_vec();
+                    self.broadcast(&[Message::binary(bytes)], false, now);
+                }
             }
             if now >= next_status {
-                if let Some(feed) = &self.feed {
+                if let Some(feed) = self.feed.as_ref().filter(|_| !self.clients.is_empty()) {
                     let status = ViewStatus::read(&feed.stats, &self.poses);
                     let text = hud::message("status", &status);
                     self.broadcast(&[Message::text(text)], false, now);
