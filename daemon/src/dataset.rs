@@ -372,7 +372,7 @@ impl BuiltDance {
 /// every fifth one from the third (indices 2, 7, 12, …) goes to validation. Styles with fewer
 /// than three dances stay in training.
 pub fn is_validation(name: &str, all_names: &[String]) -> bool {
-    let style = |n: &str| n.strip_prefix("DANCE_").and_then(|s| s.chars().next());
+    let style = model::tang2018::style_letter;
     let mut same: Vec<&String> = all_names
         .iter()
         .filter(|n| style(n) == style(name))

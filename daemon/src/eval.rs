@@ -94,7 +94,7 @@ pub const STYLE_WINDOW_S: f64 = 10.0;
 
 /// The style of a tang2018 dance by its name (`DANCE_W_3` is a waltz).
 pub fn style_of(dance: &str) -> Option<usize> {
-    match dance.strip_prefix("DANCE_")?.chars().next()? {
+    match model::tang2018::style_letter(dance)? {
         'C' => Some(0),
         'R' => Some(1),
         'T' => Some(2),

@@ -17,6 +17,12 @@ pub const TANG_POINTS: usize = 23;
 /// Motion frames per second.
 pub const TANG_FPS: f64 = 25.0;
 
+/// The style letter of a dance's folder name (`DANCE_W_3` → `W`: cha-cha C, rumba R, tango T,
+/// waltz W).
+pub fn style_letter(dance: &str) -> Option<char> {
+    dance.strip_prefix("DANCE_")?.chars().next()
+}
+
 /// Why a dance could not be read; every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum TangError {
