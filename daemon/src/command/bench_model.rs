@@ -109,7 +109,7 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
     println!(
         "first frame: largest normalised feature {} = {value:.2} ({} held)",
         model::motion::feature_name(worst).unwrap_or_default(),
-        dancer.bad_frames()
+        dancer.safety_counts().map_or(0, |c| c.held)
     );
     let times = time_frames(&mut dancer, &song, args.frames.max(1), args.temperature);
     let q = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
@@ -125,7 +125,7 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
         q(0.5) / 1e3,
         q(0.99) / 1e3,
         times[times.len() - 1] / 1e3,
-        dancer.bad_frames()
+        dancer.safety_counts().map_or(0, |c| c.held)
     );
     Ok(())
 }

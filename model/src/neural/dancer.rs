@@ -219,31 +219,10 @@ impl NeuralDancer {
         self.foot_lock.set_strength(strength);
     }
 
-    /// Frames since the last reset whose steps were shortened to keep the sustained speed
-    /// within [`SUSTAINED_SPEED_LIMIT_MPS`].
-    pub fn speed_limited_frames(&self) -> u64 {
-        self.counts.speed_limited
-    }
-
-    /// Restarts since the last reset (after [`RESTART_AFTER_HELD`] held frames in a row).
-    pub fn restarts(&self) -> u64 {
-        self.counts.restarts
-    }
-
     /// Switches the safety nets on or off ([`SafetyNets::NETWORK_ONLY`]: the network alone);
     /// set before dancing (the foot lock's offset and the speed average carry on as they are).
     pub fn set_safety_nets(&mut self, nets: SafetyNets) {
         self.nets = nets;
-    }
-
-    /// The nets that are on.
-    pub fn safety_nets(&self) -> SafetyNets {
-        self.nets
-    }
-
-    /// Frames each net acted on since the last reset.
-    pub fn safety_counts(&self) -> SafetyCounts {
-        self.counts
     }
 
     /// Pushes the seed clip through the cache; the next frame continues it.
@@ -299,12 +278,6 @@ impl NeuralDancer {
     /// The last flow sample, normalised features (for diagnostics: a held frame's culprit).
     pub fn last_sample(&self) -> &[f32] {
         &self.sample
-    }
-
-    /// Frames since the last reset whose output was non-finite or exploding (the last good
-    /// pose was held instead).
-    pub fn bad_frames(&self) -> u64 {
-        self.counts.held
     }
 }
 
@@ -473,6 +446,16 @@ mod tests {
     use crate::source::KeyPoseTarget;
     use glam::Quat;
 
+    fn counts(d: &NeuralDancer) -> SafetyCounts {
+        d.safety_counts()
+            .expect("the neural dancer has safety nets")
+    }
+
+    /// Frames whose output was non-finite or exploding (the last good pose held instead).
+    fn held_frames(d: &NeuralDancer) -> u64 {
+        counts(d).held
+    }
+
     fn dancer(noise: f32) -> NeuralDancer {
         let c = NetConfig::tiny();
         let mut tensors = init_net(&c, 1);
@@ -526,7 +509,7 @@ mod tests {
         d.reset(3);
         let mut pose = Pose::rest();
         d.step(&music, &Controls::default(), &mut pose);
-        assert_eq!(d.bad_frames(), 0);
+        assert_eq!(held_frames(d), 0);
         pose.root_position.x.hypot(pose.root_position.z)
     }
 
@@ -639,7 +622,7 @@ mod tests {
                 d.step(&music, &controls, &mut pose);
                 assert!(pose.is_finite());
             }
-            d.safety_counts()
+            counts(&d)
         };
         let shipped = run(SafetyNets::SHIPPED);
         assert_eq!(shipped.frames, 300);
@@ -692,9 +675,9 @@ mod tests {
             "sustained {sustained} m/s"
         );
         assert!(
-            d.speed_limited_frames() > 400,
+            counts(&d).speed_limited > 400,
             "{}",
-            d.speed_limited_frames()
+            counts(&d).speed_limited
         );
     }
 
@@ -711,9 +694,9 @@ mod tests {
         let margin = RANGE_MARGIN * 0.1 + 1e-4;
         let mut sampled = 0;
         for _ in 0..100 {
-            let held = d.bad_frames();
+            let held = held_frames(&d);
             d.step(&[[0.3; FEATURE_DIM]; 3], &controls, &mut pose);
-            if d.bad_frames() > held {
+            if held_frames(&d) > held {
                 continue;
             }
             sampled += 1;
@@ -753,7 +736,7 @@ mod tests {
             pose
         };
         let pose = arrive(&mut d);
-        assert_eq!(d.bad_frames(), 0);
+        assert_eq!(held_frames(&d), 0);
         for j in 1..22 {
             let a = pose.local_rotations[j].angle_between(target);
             assert!(a < 0.02, "joint {j} is {a} rad off");
@@ -793,7 +776,7 @@ mod tests {
             d.step(&[[0.0; FEATURE_DIM]], &controls, &mut pose);
             assert!(pose.is_finite());
         }
-        assert_eq!(d.bad_frames(), 2 * RESTART_AFTER_HELD as u64);
-        assert_eq!(d.restarts(), 2);
+        assert_eq!(held_frames(&d), 2 * RESTART_AFTER_HELD as u64);
+        assert_eq!(counts(&d).restarts, 2);
     }
 }
