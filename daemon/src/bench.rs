@@ -32,13 +32,15 @@ pub struct BenchItem {
     pub downbeats: Option<Vec<f64>>,
     /// Seconds at the start left unscored (mir_eval skips 5 s; a clip shorter than that can't).
     pub skip_s: f64,
+    /// Beats per bar, where the annotation gives positions in the bar (the largest position).
+    pub meter: Option<usize>,
 }
 
 /// A named list of recordings.
 #[derive(Clone, Debug)]
 pub struct BenchSet {
     /// Name in the table.
-    pub name: &'static str,
+    pub name: String,
     /// Its recordings.
     pub items: Vec<BenchItem>,
 }
@@ -68,6 +70,11 @@ pub struct ItemScore {
     pub tempo_bpm: f64,
     /// Beats per bar most often reported over the scored span.
     pub meter: usize,
+    /// Share of the timely beats after the first four annotated bars that report the
+    /// annotated meter, where it is annotated.
+    pub meter_right: Option<f64>,
+    /// Mean bar confidence the tracker reported over those beats.
+    pub bar_confidence: f64,
     /// Audio seconds.
     pub duration_s: f64,
     /// Analyzer seconds.
@@ -138,30 +145,46 @@ impl SynthSongInfo {
 
 /// The rendered songs with exact beats in `data/synth-beats`.
 pub fn synth_set(data: &Path) -> BenchSet {
+    rendered_set("synth-beats", &data.join("synth-beats"))
+}
+
+/// Songs rendered by `synth_beats.py` (exact beats and bar positions) in `dir`, as a set named
+/// `name`.
+pub fn rendered_set(name: &str, dir: &Path) -> BenchSet {
     let mut items = Vec::new();
-    for p in sorted_dir(&data.join("synth-beats")) {
+    for p in sorted_dir(dir) {
         if p.extension().is_some_and(|e| e == "flac")
             && let Ok(beats) = read_times(&p.with_extension("beats"))
         {
-            let name = p
+            let stem = p
                 .file_stem()
                 .unwrap_or_default()
                 .to_string_lossy()
                 .into_owned();
-            let downbeats = read_downbeats(&p.with_extension("beats"));
+            let positions = read_beat_positions(&p.with_extension("beats"));
+            let meter = positions
+                .as_ref()
+                .and_then(|v| v.iter().map(|&(_, p)| p).max());
+            let downbeats = positions.map(|v| {
+                v.into_iter()
+                    .filter(|&(_, p)| p == 1)
+                    .map(|(t, _)| t)
+                    .collect()
+            });
             items.push(BenchItem {
-                name,
+                name: stem,
                 audio: p,
                 beats,
                 span: None,
                 onsets: None,
                 downbeats,
                 skip_s: metrics::MIN_BEAT_TIME_S,
+                meter,
             });
         }
     }
     BenchSet {
-        name: "synth-beats",
+        name: name.to_string(),
         items,
     }
 }
@@ -208,10 +231,11 @@ pub fn tang_set(data: &Path) -> BenchSet {
             onsets: None,
             downbeats: None,
             skip_s: metrics::MIN_BEAT_TIME_S,
+            meter: None,
         });
     }
     BenchSet {
-        name: "tang2018",
+        name: "tang2018".into(),
         items,
     }
 }
@@ -229,28 +253,43 @@ pub fn madmom_set(data: &Path) -> BenchSet {
             onsets: read_times(&dir.join("sample.onsets")).ok(),
             downbeats: read_downbeats(&dir.join("sample.beats")),
             skip_s: 0.0,
+            meter: None,
         });
     }
     BenchSet {
-        name: "madmom-tests",
+        name: "madmom-tests".into(),
         items,
     }
 }
 
-/// Downbeats from a beat file whose second column is the position in the bar (1 = downbeat).
-fn read_downbeats(path: &Path) -> Option<Vec<f64>> {
+/// Beats with their position in the bar (1 = downbeat) from a beat file whose second column
+/// is that position; `None` if the file has no such column.
+pub fn read_beat_positions(path: &Path) -> Option<Vec<(f64, usize)>> {
     let text = fs::read_to_string(path).ok()?;
     let mut out = Vec::new();
-    for line in text.lines().filter(|l| !l.starts_with('#')) {
+    for line in text.lines().filter(|l| !l.trim_start().starts_with('#')) {
         let mut cols = line.split_whitespace();
         let (Some(t), Some(p)) = (cols.next(), cols.next()) else {
             continue;
         };
-        if p.parse::<f64>().ok()? == 1.0 {
-            out.push(t.parse().ok()?);
+        let position = p.parse::<f64>().ok()?;
+        if !(position >= 1.0 && position.fract() == 0.0) {
+            return None;
         }
+        out.push((t.parse().ok()?, position as usize));
     }
-    Some(out)
+    (!out.is_empty()).then_some(out)
+}
+
+/// Downbeats from a beat file whose second column is the position in the bar (1 = downbeat).
+fn read_downbeats(path: &Path) -> Option<Vec<f64>> {
+    Some(
+        read_beat_positions(path)?
+            .into_iter()
+            .filter(|&(_, p)| p == 1)
+            .map(|(t, _)| t)
+            .collect(),
+    )
 }
 
 fn in_span(times: &[f64], span: Option<(f64, f64)>) -> Vec<f64> {
@@ -295,6 +334,25 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
         let e = metrics::trim_beats(&in_span(&est, item.span), item.skip_s);
         metrics::beat_f_measure(&r, &e, BEAT_TOLERANCE_S)
     });
+    // The meter counts from the fifth annotated bar on.
+    let meter_from_s = item
+        .meter
+        .and_then(|m| item.beats.get(4 * m).copied())
+        .unwrap_or(f64::INFINITY);
+    let counted: Vec<&dsp::BeatEvent> = analysis
+        .beats
+        .iter()
+        .filter(|b| b.decided_at_s - b.time_s <= MAX_DECISION_LAG_S && b.time_s >= meter_from_s)
+        .collect();
+    let meter_right = item.meter.map(|m| {
+        let right = counted.iter().filter(|b| b.beats_per_bar == m).count();
+        right as f64 / counted.len().max(1) as f64
+    });
+    let bar_confidence = counted
+        .iter()
+        .map(|b| f64::from(b.bar_confidence))
+        .sum::<f64>()
+        / counted.len().max(1) as f64;
     let onset_f = item.onsets.as_ref().map(|r| {
         let est: Vec<f64> = analysis.onsets.iter().map(|o| o.time_s).collect();
         metrics::onset_f_measure(r, &est, ONSET_TOLERANCE_S).f_measure
@@ -324,6 +382,8 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
                 4
             }
         },
+        meter_right,
+        bar_confidence,
         duration_s: analysis.duration_s,
         analysis_s: analysis.analysis_time.as_secs_f64(),
         error: None,
@@ -333,18 +393,12 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
 /// Runs one tracker over a set with `jobs` worker threads (each analysis runs on one thread).
 pub fn run_set(
     set: &BenchSet,
-    tracker: BeatTrackerKind,
-    beat_params: dsp::beat::BeatTrackerParams,
+    options: AnalyzeOptions,
     jobs: usize,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<ItemScore> {
     crate::pool::parallel_map(&set.items, jobs, |item| {
-        let opts = AnalyzeOptions {
-            tracker,
-            beat_params,
-            ..AnalyzeOptions::default()
-        };
-        let r = match analyze_file(&item.audio, opts, &mut |_, _| {}) {
+        let r = match analyze_file(&item.audio, options, &mut |_, _| {}) {
             Ok(a) => score(item, &a),
             Err(e) => ItemScore {
                 name: item.name.clone(),
@@ -380,11 +434,11 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
     let _ = writeln!(out, "\n{} — {}", set.name, tracker.name());
     let _ = writeln!(
         out,
-        "| file | F | CMLt | AMLt | downbeat F | meter | tempo | beats | late | lag p50 ms |"
+        "| file | F | CMLt | AMLt | downbeat F | meter | meter right | bar confidence | tempo | beats | late | lag p50 ms |"
     );
     let _ = writeln!(
         out,
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     for s in scores {
         if let Some(e) = &s.error {
@@ -393,13 +447,16 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
         }
         let _ = writeln!(
             out,
-            "| {} | {:.3} | {:.3} | {:.3} | {} | {} | {:.1} | {} | {} | {:.0} |",
+            "| {} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.2} | {:.1} | {} | {} | {:.0} |",
             s.name,
             s.f_measure,
             s.cmlt,
             s.amlt,
             s.downbeat_f.map_or("–".to_string(), |f| format!("{f:.3}")),
             s.meter,
+            s.meter_right
+                .map_or("–".to_string(), |f| format!("{:.0} %", 100.0 * f)),
+            s.bar_confidence,
             s.tempo_bpm,
             s.beats,
             s.late_beats,
@@ -407,4 +464,19 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
         );
     }
     out
+}
+
+/// The set's constant-tempo songs without a drumless intro, 70–170 BPM, slowest first.
+pub fn steady_songs(set: &BenchSet) -> Vec<(f64, &BenchItem)> {
+    let mut steady: Vec<(f64, &BenchItem)> = set
+        .items
+        .iter()
+        .filter_map(|i| {
+            let info = SynthSongInfo::read(&i.audio)?;
+            (info.constant && !info.has_intro() && (70.0..=170.0).contains(&info.bpm))
+                .then_some((info.bpm, i))
+        })
+        .collect();
+    steady.sort_by(|a, b| a.0.total_cmp(&b.0));
+    steady
 }

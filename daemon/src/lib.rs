@@ -3,6 +3,7 @@
 //! This crate wires the `dsp` analysis to files, commands and the live pipeline.
 
 pub mod alloc_counter;
+pub mod bar_cue;
 pub mod beat_recovery;
 pub mod bench;
 pub mod command;

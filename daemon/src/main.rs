@@ -7,6 +7,7 @@ use tracing_subscriber::EnvFilter;
 
 use daemon::command::analyze::{AnalyzeArgs, analyze};
 use daemon::command::bench_beats::{BenchBeatsArgs, bench_beats};
+use daemon::command::bench_cues::{BenchCuesArgs, bench_cues};
 use daemon::command::bench_lag::{BenchLagArgs, bench_lag};
 use daemon::command::bench_live::{BenchLiveArgs, bench_live};
 use daemon::command::bench_model::{BenchModelArgs, bench_model};
@@ -88,6 +89,8 @@ enum BenchCommand {
     Live(BenchLiveArgs),
     /// How far the dancer a receiver sees trails the heard music, measured over UDP.
     Lag(BenchLagArgs),
+    /// Key poses cued on the next bar during real-time replays: how many land on a downbeat.
+    Cues(BenchCuesArgs),
     /// Per-frame sampling time of the neural dancer on one thread (p50, p99).
     Model(BenchModelArgs),
 }
@@ -108,6 +111,7 @@ fn main() -> Result<()> {
             BenchCommand::Beats(args) => bench_beats(args),
             BenchCommand::Live(args) => bench_live(args),
             BenchCommand::Lag(args) => bench_lag(args),
+            BenchCommand::Cues(args) => bench_cues(args),
             BenchCommand::Model(args) => bench_model(&args),
         },
         Command::Generate(args) => generate(&args),

@@ -20,6 +20,7 @@ use crate::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettin
 use crate::live::replay::{self, ReplayAudio, ReplaySettings};
 use crate::live::scheduler::FrameBuilder;
 use crate::live::sink::MemoryPoseBank;
+use crate::live::wire::ControlEvent;
 
 /// Joint positions of one frame relative to the hips (Unity coordinates, metres).
 pub type BodyShape = Vec<Vec3>;
@@ -253,24 +254,37 @@ pub struct LagRun<'a> {
     pub rate_hz: f64,
 }
 
-/// Replays `run.audio` through the live pipeline with `source` at temperature 0, receives its
-/// native OSC on a local socket, and aligns that with `reference` (the same song danced
-/// offline, frame i at i / `reference_rate`: [`offline_reference`]).
-pub fn measure_live_lag(
+/// What a receiver got from one real-time replay, on the heard clock.
+pub struct Received {
+    /// Every frame's body shape with the heard time it arrived at, seconds.
+    pub frames: Vec<(f64, BodyShape)>,
+    /// Every `/danced/beat` with the heard time it arrived at and the beat's own time.
+    pub beats: Vec<(f64, f64)>,
+    /// Frames the sender had to hold (motion late).
+    pub late_frames: u64,
+    /// Times the replay fell behind and restarted its clock (the heard axis is then unsure).
+    pub replay_rebases: u64,
+}
+
+/// Replays `run.audio` through the live pipeline with `source` at temperature 0 and receives
+/// its native OSC on a local socket; `cues` are sent through the control path when the heard
+/// time reaches theirs (pose names refer to `bank`).
+pub fn replay_and_receive(
     run: &LagRun<'_>,
     source: Box<dyn MotionSource + Send>,
-    reference: &[BodyShape],
-    reference_rate: f64,
-) -> Result<LiveLag> {
-    let socket = UdpSocket::bind("127.0.0.1:0").context("binding the lag receiver")?;
-    socket.set_read_timeout(Some(Duration::from_millis(20)))?;
+    bank: &MemoryPoseBank,
+    cues: &[(f64, ControlEvent)],
+) -> Result<Received> {
+    let socket = UdpSocket::bind("127.0.0.1:0").context("binding the receiver")?;
+    socket.set_read_timeout(Some(Duration::from_millis(5)))?;
     let mut config = Config::default();
     config.output.osc = vec![socket.local_addr()?.to_string()];
     config.output.rate_hz = run.rate_hz;
     let sink = OscSink::from_config(&config)?;
     let ctx = LiveContext::new();
     let (writer, reader) = ctx.ring();
-    let hub = ControlHub::new(&MemoryPoseBank::new(), ctx.stats.clone());
+    let mut hub = ControlHub::new(bank, ctx.stats.clone());
+    let mut control = hub.sender();
     let pipeline = Pipeline::start(
         &ctx,
         PipelineSettings {
@@ -297,11 +311,25 @@ pub fn measure_live_lag(
         &ctx,
     )?;
     let epoch = ctx.epoch;
+    let heard = |at: Instant, origin_ns: u64| {
+        (at.duration_since(epoch).as_nanos() as f64 - origin_ns as f64) * 1e-9
+    };
     let mut got: Vec<(Instant, BodyShape)> = Vec::with_capacity((run.seconds * 70.0) as usize);
     let mut beats: Vec<(Instant, f64)> = Vec::new();
+    let mut pending = cues.iter();
+    let mut next_cue = pending.next();
     let mut buf = vec![0u8; 65_536];
     let limit = Instant::now() + Duration::from_secs_f64(run.seconds + 30.0);
     while !ctx.stopped() && !pipeline.failed() && Instant::now() < limit {
+        let origin_ns = ctx.stats.replay_origin_ns.load(Ordering::Relaxed);
+        while let Some((at_s, cue)) = next_cue {
+            if origin_ns == u64::MAX || heard(Instant::now(), origin_ns) < *at_s {
+                break;
+            }
+            // A refused cue is counted in the run's stats like any other control.
+            let _ = control.send(cue.clone());
+            next_cue = pending.next();
+        }
         if let Ok(n) = socket.recv(&mut buf) {
             let at = Instant::now();
             if let Some(shape) = decode_shape(&buf[..n]) {
@@ -312,7 +340,7 @@ pub fn measure_live_lag(
         }
     }
     let origin_ns = ctx.stats.replay_origin_ns.load(Ordering::Relaxed);
-    let rebases = ctx.stats.replay_rebases.load(Ordering::Relaxed);
+    let replay_rebases = ctx.stats.replay_rebases.load(Ordering::Relaxed);
     let (report, _) = pipeline.stop()?;
     if replay.join().is_err() {
         bail!("the replay thread panicked");
@@ -320,25 +348,48 @@ pub fn measure_live_lag(
     if origin_ns == u64::MAX {
         bail!("the replay never started");
     }
-    let heard =
-        |at: Instant| (at.duration_since(epoch).as_nanos() as f64 - origin_ns as f64) * 1e-9;
+    Ok(Received {
+        frames: got
+            .into_iter()
+            .map(|(at, s)| (heard(at, origin_ns), s))
+            .collect(),
+        beats: beats
+            .into_iter()
+            .map(|(at, t)| (heard(at, origin_ns), t))
+            .collect(),
+        late_frames: report.late_frames,
+        replay_rebases,
+    })
+}
+
+/// Replays `run.audio` through the live pipeline with `source` at temperature 0, receives its
+/// native OSC on a local socket, and aligns that with `reference` (the same song danced
+/// offline, frame i at i / `reference_rate`: [`offline_reference`]).
+pub fn measure_live_lag(
+    run: &LagRun<'_>,
+    source: Box<dyn MotionSource + Send>,
+    reference: &[BodyShape],
+    reference_rate: f64,
+) -> Result<LiveLag> {
+    let got = replay_and_receive(run, source, &MemoryPoseBank::new(), &[])?;
     let received: Vec<(f64, BodyShape)> = got
+        .frames
         .into_iter()
-        .map(|(at, s)| (heard(at), s))
         .filter(|(h, _)| *h >= run.settle_s)
         .collect();
-    let beat_message_delays_s = beats
+    let beat_message_delays_s = got
+        .beats
         .into_iter()
         .filter(|(_, t)| *t >= run.settle_s)
-        .map(|(at, t)| heard(at) + run.lead_ms * 1e-3 - t)
+        .map(|(h, t)| h + run.lead_ms * 1e-3 - t)
         .collect();
     let estimate = estimate_lag(&received, reference, reference_rate, 0.5)
         .context("too few frames received to align")?;
     Ok(LiveLag {
         estimate,
         beat_message_delays_s,
-        late_frames: report.late_frames,
-        replay_rebases: rebases,
+        late_frames: got.late_frames,
+        replay_rebases: got.replay_rebases,
     })
 }
 

@@ -28,6 +28,8 @@ pub struct HopSummary {
     pub beat_phase: f64,
     /// Bar phase in [0, 1).
     pub bar_phase: f64,
+    /// Confidence of the bar count in [0, 1].
+    pub bar_confidence: f32,
     /// RMS energy in dBFS.
     pub energy_db: f32,
 }
@@ -46,6 +48,8 @@ pub struct FileAnalysis {
     /// Per-hop inputs of the learned beat activation, flat `[hops][BEAT_INPUT_DIM]` (empty
     /// unless asked for).
     pub beat_inputs: Vec<f32>,
+    /// The bar features of every tracked beat, in order (empty unless asked for).
+    pub bar_features: Vec<dsp::BarFeatures>,
     /// Time of the first hop, seconds (hops follow at `dsp::hop_rate()`).
     pub first_hop_s: Option<f64>,
     /// Length of the audio, seconds.
@@ -97,6 +101,10 @@ pub struct AnalyzeOptions {
     pub keep_beat_inputs: bool,
     /// Tuning of the native beat tracker.
     pub beat_params: dsp::beat::BeatTrackerParams,
+    /// Tuning of the bar pointer.
+    pub bar_params: dsp::BarPointerParams,
+    /// Keep each tracked beat's bar features (for training the downbeat network).
+    pub keep_bar_features: bool,
     /// Song time the analysis starts at, seconds: earlier audio is decoded and skipped, as if
     /// the stream had begun there (all times are then counted from it).
     pub start_s: f64,
@@ -132,11 +140,17 @@ struct Collector<'a> {
     result: &'a mut FileAnalysis,
     keep_hops: bool,
     keep_beat_inputs: bool,
+    keep_bar_features: bool,
 }
 
 impl AnalysisSink for Collector<'_> {
     fn hop(&mut self, hop: &HopFrame) {
         self.result.first_hop_s.get_or_insert(hop.time_s);
+        if self.keep_bar_features
+            && let Some(f) = hop.bar_features
+        {
+            self.result.bar_features.push(*f);
+        }
         if self.keep_beat_inputs {
             self.result.beat_inputs.extend_from_slice(hop.beat_input);
         }
@@ -148,6 +162,7 @@ impl AnalysisSink for Collector<'_> {
                 tempo_bpm: hop.tempo_bpm,
                 beat_phase: hop.beat_phase,
                 bar_phase: hop.bar_phase,
+                bar_confidence: hop.bar_confidence,
                 energy_db: hop.energy_db,
             });
         }
@@ -237,6 +252,7 @@ fn stream(
         model_rate: options.model_rate,
         tracker: options.tracker,
         beat_params: options.beat_params,
+        bar_params: options.bar_params,
     })
     .map_err(|source| AnalyzeError::Dsp { path: name, source })?;
     let mut result = FileAnalysis {
@@ -274,6 +290,7 @@ fn stream(
             result: &mut result,
             keep_hops: options.keep_hops,
             keep_beat_inputs: options.keep_beat_inputs,
+            keep_bar_features: options.keep_bar_features,
         };
         for chunk in packet[..n * channels as usize].chunks(block) {
             analyzer.process(chunk, &mut sink);

@@ -1,6 +1,6 @@
 //! `--plot`: one PNG with what a user checks at a glance — onset strength and the learned beat
-//! activation with onsets and beats, how late each beat was decided, tempo, and bar phase with
-//! downbeats.
+//! activation with onsets and beats, how late each beat was decided, tempo, and the bar: phase, each
+//! beat's count and meter, and the bar tracker's confidence.
 
 use std::path::Path;
 
@@ -112,13 +112,16 @@ fn draw(a: &FileAnalysis, title: &str, path: &Path) -> Result<(), Box<dyn std::e
         &MAGENTA,
     ))?;
 
-    // Bar phase and downbeats.
+    // Bar phase, each beat's count, and how sure the bar tracker is.
     let mut c = ChartBuilder::on(&panels[3])
         .margin(8)
         .x_label_area_size(30)
         .y_label_area_size(60)
-        .caption("bar phase · downbeats (black)", ("sans-serif", 16))
-        .build_cartesian_2d(0.0..t_end, 0.0..1.0)?;
+        .caption(
+            "bar: phase (cyan), each beat's count (blue 4/4, orange 3/4; downbeats bold), confidence (grey)",
+            ("sans-serif", 16),
+        )
+        .build_cartesian_2d(0.0..t_end, 0.0..1.15)?;
     c.configure_mesh()
         .disable_mesh()
         .x_desc("time (s)")
@@ -128,6 +131,22 @@ fn draw(a: &FileAnalysis, title: &str, path: &Path) -> Result<(), Box<dyn std::e
             .iter()
             .map(|h| Circle::new((h.time_s, h.bar_phase), 1, CYAN.filled())),
     )?;
+    c.draw_series(LineSeries::new(
+        a.hops
+            .iter()
+            .map(|h| (h.time_s, f64::from(h.bar_confidence))),
+        &RGBColor(150, 150, 150),
+    ))?;
+    let orange = RGBColor(230, 120, 0);
+    c.draw_series(a.beats.iter().map(|b| {
+        let colour = if b.beats_per_bar == 3 { orange } else { BLUE };
+        let size = if b.beat_in_bar == 1 { 18 } else { 12 };
+        Text::new(
+            b.beat_in_bar.to_string(),
+            (b.time_s, 1.12),
+            ("sans-serif", size).into_font().color(&colour),
+        )
+    }))?;
     c.draw_series(
         a.beats
             .iter()

@@ -500,7 +500,7 @@ fn oscdump_receives_the_native_and_vmc_streams() {
             .lines()
             .any(|l| l.contains(" /danced/joint/LeftHand fffffff "))
     );
-    assert!(native.lines().any(|l| l.contains(" /danced/beat iiff ")));
+    assert!(native.lines().any(|l| l.contains(" /danced/beat iifff ")));
     assert_eq!(
         count(&vmc, "/VMC/Ext/Bone/Pos"),
         JOINT_COUNT * count(&vmc, "/VMC/Ext/OK")

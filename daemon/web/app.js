@@ -192,7 +192,7 @@ state.boneWorldPositions = (names) => {
 
 // ---- HUD ----
 const $ = (id) => document.getElementById(id);
-function showBeat(index, perBar, bpm) {
+function showBeat(index, perBar, bpm, barConfidence) {
   state.beats++;
   state.lastBeat = { index, perBar, bpm, at: performance.now() };
   const b = $('beat');
@@ -206,6 +206,8 @@ function showBeat(index, perBar, bpm) {
     s.className = (i + 1 === index ? 'now' : '') + (i === 0 ? ' one' : '');
   });
   if (bpm > 0) $('tempo').textContent = bpm.toFixed(1);
+  // How sure the bar tracker is of this count (a 5th argument since the downbeat network).
+  if (typeof barConfidence === 'number') $('barconf').textContent = `${perBar}/4 · ${Math.round(100 * barConfidence)} %`;
 }
 
 function showStatus(s) {
@@ -295,7 +297,7 @@ function connect() {
       return;
     }
     for (const m of messages) {
-      if (m.addr.endsWith('/beat') && m.args.length >= 3) showBeat(m.args[0], m.args[1], m.args[2]);
+      if (m.addr.endsWith('/beat') && m.args.length >= 3) showBeat(m.args[0], m.args[1], m.args[2], m.args[4]);
     }
   };
 }

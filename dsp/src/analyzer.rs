@@ -1,7 +1,10 @@
 //! The whole streaming analysis chain behind one `process` call per audio block.
 
+use crate::bar_features::BarHop;
+use crate::bar_pointer::BarPointerParams;
 use crate::beat::{BeatTracker, BeatTrackerParams};
 use crate::beat_activation::{BEAT_INPUT_DIM, BeatActivation, BeatInput, BeatNetEnsemble};
+use crate::beat_counter::BeatCounter;
 use crate::chroma::ChromaFilterbank;
 use crate::feature::{FeatureFrame, FeatureFramer};
 use crate::hop::HopFrame;
@@ -46,6 +49,8 @@ pub struct AnalyzerConfig {
     pub tracker: BeatTrackerKind,
     /// Tuning of the native beat tracker.
     pub beat_params: BeatTrackerParams,
+    /// Tuning of the bar pointer.
+    pub bar_params: BarPointerParams,
 }
 
 /// An onset, reported by the causal peak picker.
@@ -68,6 +73,8 @@ pub struct BeatEvent {
     pub beat_in_bar: usize,
     /// Beats per bar (3 or 4).
     pub beats_per_bar: usize,
+    /// Probability the bar tracker gives this count, in [0, 1].
+    pub bar_confidence: f32,
     /// Tempo at this beat, in BPM.
     pub tempo_bpm: f64,
     /// Stream time at which the tracker committed to it, in seconds.
@@ -100,6 +107,20 @@ enum Tracker {
     Aubio(Box<crate::aubio_tracker::AubioTracker>),
 }
 
+/// The bar pointer's tuning for `config`. aubio's tracker computes none of the band-group
+/// accents or the learned activation the downbeat network was trained with, so with it the
+/// network may place beats in the bar but not overrule the tracked beat's level.
+fn bar_params(config: AnalyzerConfig) -> BarPointerParams {
+    match config.tracker {
+        BeatTrackerKind::Native => config.bar_params,
+        BeatTrackerKind::Aubio => BarPointerParams {
+            half_time: 0.0,
+            double_time: 0.0,
+            ..config.bar_params
+        },
+    }
+}
+
 /// Per-hop analysis state; split from the resampler so its callback can borrow it.
 struct Core {
     history: Vec<f32>,
@@ -121,6 +142,7 @@ struct Core {
     beat_activation: f32,
     tracker: Tracker,
     meter: MeterTracker,
+    counter: BeatCounter,
     framer: Option<FeatureFramer>,
 }
 
@@ -174,7 +196,8 @@ impl Analyzer {
             beat_input: [0.0; BEAT_INPUT_DIM],
             beat_activation: 0.0,
             tracker,
-            meter: MeterTracker::new(),
+            meter: MeterTracker::new(fps, bar_params(config)),
+            counter: BeatCounter::default(),
             framer: config.model_rate.map(FeatureFramer::new),
             short,
             long,
@@ -241,7 +264,6 @@ impl Core {
         }
         let strength = self.onsets.process(&self.short_mag);
         let bass = self.onsets.low_flux();
-        self.meter.frame(&self.chroma, bass);
 
         let out = match &mut self.tracker {
             Tracker::Native(n) => {
@@ -263,6 +285,13 @@ impl Core {
             Tracker::Aubio(a) => a.process(&self.history[LONG_WINDOW - HOP..]),
         };
 
+        self.meter.hop(&BarHop {
+            chroma: &self.chroma,
+            bass_flux: bass,
+            group_flux: &self.beat_input,
+            beat_activation: self.beat_activation,
+            energy_db,
+        });
         let fps = hop_rate();
         if let Some(ago) = out.onset {
             let e = OnsetEvent {
@@ -272,13 +301,26 @@ impl Core {
             };
             sink.onset(&e);
         }
-        if let Some(ago) = out.beat {
-            let (beat_in_bar, beats_per_bar) = self.meter.beat();
+        let tracked = out.beat.map(|ago| {
+            let beat_time_s = time_s - ago / fps + EVENT_TIME_OFFSET_S;
+            (beat_time_s, self.meter.beat(beat_time_s, out.tempo_bpm))
+        });
+        let bar_features = tracked.and(self.meter.last_features());
+        let counted = self.counter.hop(
+            time_s + EVENT_TIME_OFFSET_S,
+            tracked,
+            out.tempo_bpm,
+            out.beat_phase,
+            out.frames_to_next_beat,
+            fps,
+        );
+        if let Some((beat_time_s, beat_in_bar)) = counted.beat {
             let e = BeatEvent {
-                time_s: time_s - ago / fps + EVENT_TIME_OFFSET_S,
+                time_s: beat_time_s,
                 beat_in_bar,
-                beats_per_bar,
-                tempo_bpm: out.tempo_bpm,
+                beats_per_bar: counted.beats_per_bar,
+                bar_confidence: self.meter.confidence(),
+                tempo_bpm: counted.tempo_bpm,
                 decided_at_s: now,
             };
             sink.beat(&e);
@@ -294,13 +336,16 @@ impl Core {
             beat_input: &self.beat_input,
             beat_activation: self.beat_activation,
             chroma: &self.chroma,
-            tempo_bpm: out.tempo_bpm,
+            tempo_bpm: counted.tempo_bpm,
             tempo_confidence: out.tempo_confidence,
-            beat_phase: out.beat_phase,
-            next_beat_s: time_s + EVENT_TIME_OFFSET_S + out.frames_to_next_beat / fps,
-            bar_phase: self.meter.bar_phase(out.beat_phase),
-            beat_in_bar: self.meter.beat_in_bar(),
-            beats_per_bar: self.meter.beats_per_bar(),
+            beat_phase: counted.beat_phase,
+            next_beat_s: time_s + EVENT_TIME_OFFSET_S + counted.frames_to_next_beat / fps,
+            bar_phase: ((counted.beat_in_bar - 1) as f64 + counted.beat_phase)
+                / counted.beats_per_bar as f64,
+            beat_in_bar: counted.beat_in_bar,
+            beats_per_bar: counted.beats_per_bar,
+            bar_confidence: self.meter.confidence(),
+            bar_features,
             locked: out.locked,
         };
         sink.hop(&hop);

@@ -431,6 +431,7 @@ mod tests {
                 model_rate: None,
                 tracker: BeatTrackerKind::Aubio,
                 beat_params: Default::default(),
+                bar_params: Default::default(),
             })
             .unwrap();
             let mut beats = Beats(Vec::new());

@@ -92,15 +92,8 @@ impl BeatTrackerParams {
     /// Applies `name=value` overrides separated by commas (for tuning runs); unknown names or
     /// unparsable values are reported back.
     pub fn with_overrides(mut self, spec: &str) -> Result<Self, String> {
-        for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            let (k, v) = item
-                .split_once('=')
-                .ok_or_else(|| format!("expected name=value, got {item:?}"))?;
-            let x: f64 = v
-                .trim()
-                .parse()
-                .map_err(|_| format!("{k}: not a number: {v:?}"))?;
-            match k.trim() {
+        for (k, x) in crate::tuning::overrides(spec)? {
+            match k {
                 "min_bpm" => self.min_bpm = x.clamp(20.0, 300.0),
                 "max_bpm" => self.max_bpm = x.clamp(20.0, 400.0),
                 "transition_lambda" => self.transition_lambda = x,

@@ -6,6 +6,7 @@
 //! The network is trained with burn by `danced-train beats` on rendered songs with exact beats
 //! (`../shared/tools/synth_beats.py`, seeds from 1000 up); its weights ship inside the binary.
 
+use crate::net_file::{NetFileError, NetFileReader, NetFileWriter};
 use crate::onset::{FLUX_GROUPS, OnsetDetector};
 
 /// Inputs per hop: the onset flux of each group of bands relative to its recent mean,
@@ -54,27 +55,8 @@ impl BeatInput {
     }
 }
 
-/// The little-endian `u32` at byte `at` of a weight file's header.
-fn read_u32(bytes: &[u8], at: usize) -> Result<u32, BeatNetError> {
-    let s = bytes
-        .get(at..at + 4)
-        .ok_or_else(|| BeatNetError::Malformed("truncated header".into()))?;
-    Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-}
-
-/// Why a beat activation weight file could not be read.
-#[derive(Debug, thiserror::Error)]
-pub enum BeatNetError {
-    /// The bytes do not start with the magic `DNBA`.
-    #[error("not a beat activation weight file (bad magic)")]
-    Magic,
-    /// The file's layout version is not this build's.
-    #[error("beat activation weight file version {0} (this build reads {VERSION})")]
-    Version(u32),
-    /// The file is shorter or longer than its header says, or its header is implausible.
-    #[error("beat activation weight file is malformed: {0}")]
-    Malformed(String),
-}
+/// What a beat activation weight file is called in errors.
+const KIND: &str = "beat activation";
 
 /// Weights of the beat activation network.
 #[derive(Clone, Debug, PartialEq)]
@@ -113,92 +95,61 @@ impl BeatNetWeights {
             .sum::<usize>()
     }
 
-    /// Appends this network's shape and weights (little-endian).
-    fn write_to(&self, b: &mut Vec<u8>) {
+    /// Appends this network's shape and weights.
+    fn write_to(&self, w: &mut NetFileWriter) {
         for v in [
-            BEAT_INPUT_DIM as u32,
-            self.channels as u32,
-            self.kernel as u32,
-            self.dilations.len() as u32,
+            BEAT_INPUT_DIM,
+            self.channels,
+            self.kernel,
+            self.dilations.len(),
         ] {
-            b.extend_from_slice(&v.to_le_bytes());
+            w.u32(v);
         }
         for &d in &self.dilations {
-            b.extend_from_slice(&(d as u32).to_le_bytes());
+            w.u32(d);
         }
-        let mut put = |xs: &[f32]| {
-            xs.iter()
-                .for_each(|x| b.extend_from_slice(&x.to_le_bytes()))
-        };
-        put(&self.input_mean);
-        put(&self.input_std);
-        put(&self.input_weight);
-        put(&self.input_bias);
-        for (w, bias) in self.conv_weight.iter().zip(&self.conv_bias) {
-            put(w);
-            put(bias);
+        w.floats(&self.input_mean);
+        w.floats(&self.input_std);
+        w.floats(&self.input_weight);
+        w.floats(&self.input_bias);
+        for (k, bias) in self.conv_weight.iter().zip(&self.conv_bias) {
+            w.floats(k);
+            w.floats(bias);
         }
-        put(&self.output_weight);
-        put(&[self.output_bias]);
+        w.floats(&self.output_weight);
+        w.floats(&[self.output_bias]);
     }
 
-    /// Reads one network written by [`Self::write_to`] at `*at`; checks every size and value.
-    fn read_from(bytes: &[u8], at: &mut usize) -> Result<Self, BeatNetError> {
-        let u32_at = |at: &mut usize| -> Result<usize, BeatNetError> {
-            let v = read_u32(bytes, *at)?;
-            *at += 4;
-            Ok(v as usize)
-        };
-        let (inputs, channels, kernel, layers) =
-            (u32_at(at)?, u32_at(at)?, u32_at(at)?, u32_at(at)?);
+    /// Reads one network written by [`Self::write_to`]; checks every size and value.
+    fn read_from(r: &mut NetFileReader) -> Result<Self, NetFileError> {
+        let inputs = r.u32()?;
         if inputs != BEAT_INPUT_DIM {
-            return Err(BeatNetError::Malformed(format!(
+            return Err(r.malformed(format!(
                 "{inputs} inputs, this build computes {BEAT_INPUT_DIM}"
             )));
         }
-        if !(1..=256).contains(&channels) || !(1..=16).contains(&kernel) || layers > 32 {
-            return Err(BeatNetError::Malformed(format!(
-                "implausible shape: {channels} channels, kernel {kernel}, {layers} layers"
-            )));
-        }
+        let channels = r.u32_in(1..=256, "channel count")?;
+        let kernel = r.u32_in(1..=16, "kernel size")?;
+        let layers = r.u32_in(0..=32, "layer count")?;
         let mut dilations = Vec::with_capacity(layers);
         for _ in 0..layers {
-            let d = u32_at(at)?;
-            if !(1..=1024).contains(&d) {
-                return Err(BeatNetError::Malformed(format!("dilation {d}")));
-            }
-            dilations.push(d);
+            dilations.push(r.u32_in(1..=1024, "dilation")?);
         }
-        let mut take = |n: usize| -> Result<Vec<f32>, BeatNetError> {
-            let raw = bytes
-                .get(*at..*at + 4 * n)
-                .ok_or_else(|| BeatNetError::Malformed("truncated weights".into()))?;
-            *at += 4 * n;
-            let v: Vec<f32> = raw
-                .chunks_exact(4)
-                .map(|s| f32::from_le_bytes([s[0], s[1], s[2], s[3]]))
-                .collect();
-            if v.iter().all(|x| x.is_finite()) {
-                Ok(v)
-            } else {
-                Err(BeatNetError::Malformed("non-finite weight".into()))
-            }
-        };
         let (c, k, i) = (channels, kernel, inputs);
-        let input_mean = take(i)?;
-        let input_std = take(i)?;
+        let input_mean = r.floats(i)?;
+        let input_std = r.floats(i)?;
         if input_std.iter().any(|&s| s <= 0.0) {
-            return Err(BeatNetError::Malformed("input std ≤ 0".into()));
+            return Err(r.malformed("input std ≤ 0"));
         }
-        let input_weight = take(c * i)?;
-        let input_bias = take(c)?;
+        let input_weight = r.floats(c * i)?;
+        let input_bias = r.floats(c)?;
         let (mut conv_weight, mut conv_bias) = (Vec::new(), Vec::new());
         for _ in 0..layers {
-            conv_weight.push(take(c * c * k)?);
-            conv_bias.push(take(c)?);
+            conv_weight.push(r.floats(c * c * k)?);
+            conv_bias.push(r.floats(c)?);
         }
-        let output_weight = take(c)?;
-        let output_bias = take(1)?[0];
+        let output_weight = r.floats(c)?;
+        let output_bias = r.floats(1)?[0];
         Ok(Self {
             channels,
             kernel,
@@ -232,40 +183,23 @@ impl BeatNetEnsemble {
 
     /// Serialises the ensemble (little-endian, versioned).
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut b = Vec::new();
-        b.extend_from_slice(MAGIC);
-        b.extend_from_slice(&VERSION.to_le_bytes());
-        b.extend_from_slice(&(self.nets.len() as u32).to_le_bytes());
+        let mut w = NetFileWriter::new(MAGIC, VERSION);
+        w.u32(self.nets.len());
         for net in &self.nets {
-            net.write_to(&mut b);
+            net.write_to(&mut w);
         }
-        b
+        w.into_bytes()
     }
 
     /// Parses an ensemble written by [`Self::to_bytes`]; checks every size and value.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, BeatNetError> {
-        if bytes.len() < 4 || &bytes[..4] != MAGIC {
-            return Err(BeatNetError::Magic);
-        }
-        let version = read_u32(bytes, 4)?;
-        if version != VERSION {
-            return Err(BeatNetError::Version(version));
-        }
-        let count = read_u32(bytes, 8)? as usize;
-        if !(1..=16).contains(&count) {
-            return Err(BeatNetError::Malformed(format!("{count} networks")));
-        }
-        let mut at = 12;
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, NetFileError> {
+        let mut r = NetFileReader::open(bytes, KIND, MAGIC, VERSION)?;
+        let count = r.u32_in(1..=16, "network count")?;
         let mut nets = Vec::with_capacity(count);
         for _ in 0..count {
-            nets.push(BeatNetWeights::read_from(bytes, &mut at)?);
+            nets.push(BeatNetWeights::read_from(&mut r)?);
         }
-        if at != bytes.len() {
-            return Err(BeatNetError::Malformed(format!(
-                "{} bytes after the last network",
-                bytes.len() - at
-            )));
-        }
+        r.finish()?;
         Ok(Self { nets })
     }
 
@@ -450,25 +384,25 @@ mod tests {
         assert_eq!(BeatNetEnsemble::from_bytes(&bytes).unwrap(), w);
         assert!(matches!(
             BeatNetEnsemble::from_bytes(b"XXXX"),
-            Err(BeatNetError::Magic)
+            Err(NetFileError::Magic { .. })
         ));
         let mut v2 = bytes.clone();
         v2[4] = 9;
         assert!(matches!(
             BeatNetEnsemble::from_bytes(&v2),
-            Err(BeatNetError::Version(9))
+            Err(NetFileError::Version { found: 9, .. })
         ));
         let mut extra = bytes.clone();
         extra.push(0);
         assert!(matches!(
             BeatNetEnsemble::from_bytes(&extra),
-            Err(BeatNetError::Malformed(_))
+            Err(NetFileError::Malformed { .. })
         ));
         for cut in [6, 10, 20, bytes.len() / 2, bytes.len() - 1] {
             assert!(
                 matches!(
                     BeatNetEnsemble::from_bytes(&bytes[..cut]),
-                    Err(BeatNetError::Malformed(_))
+                    Err(NetFileError::Malformed { .. })
                 ),
                 "cut at {cut}"
             );
@@ -478,7 +412,7 @@ mod tests {
         nan[last..].copy_from_slice(&f32::NAN.to_le_bytes());
         assert!(matches!(
             BeatNetEnsemble::from_bytes(&nan),
-            Err(BeatNetError::Malformed(_))
+            Err(NetFileError::Malformed { .. })
         ));
     }
 

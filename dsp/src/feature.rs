@@ -215,6 +215,7 @@ mod tests {
             period_s: 0.5,
             next_index_in_bar: 1,
             beats_per_bar: 4,
+            bar_confidence: 1.0,
             locked: true,
         };
         let frames: Vec<FeatureFrame> = (0..60).map(|i| frame(i, grid)).collect();

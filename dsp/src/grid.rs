@@ -16,6 +16,8 @@ pub struct BeatGrid {
     pub next_index_in_bar: u32,
     /// Beats per bar.
     pub beats_per_bar: u32,
+    /// Probability the bar tracker gives this count, in [0, 1].
+    pub bar_confidence: f32,
     /// Whether a beat is heard (the grid predicts nothing otherwise).
     pub locked: bool,
 }
@@ -43,6 +45,7 @@ impl BeatGrid {
             period_s,
             next_index_in_bar: (hop.beat_in_bar as u32 % bpb) + 1,
             beats_per_bar: bpb,
+            bar_confidence: hop.bar_confidence,
             locked: hop.locked && period_s > 0.0 && hop.next_beat_s.is_finite(),
         }
     }
@@ -109,6 +112,7 @@ mod tests {
             period_s: 0.5,
             next_index_in_bar: 2,
             beats_per_bar: 4,
+            bar_confidence: 1.0,
             locked: true,
         }
     }

@@ -1,5 +1,6 @@
 //! What the analysis knows about one hop, as handed to sinks and the feature framer.
 
+use crate::bar_features::BarFeatures;
 use crate::beat_activation::BEAT_INPUT_DIM;
 
 /// Everything known about one analysis hop (11.6 ms). Slices borrow the analyzer's buffers.
@@ -39,6 +40,11 @@ pub struct HopFrame<'a> {
     pub beat_in_bar: usize,
     /// Beats per bar (3 or 4).
     pub beats_per_bar: usize,
+    /// Probability the bar tracker gives the current count, in [0, 1].
+    pub bar_confidence: f32,
+    /// On a hop that reported a beat: the features of the beat before it, which the bar
+    /// tracker just completed and classified (kept for training the downbeat network).
+    pub bar_features: Option<&'a BarFeatures>,
     /// Whether a beat is heard.
     pub locked: bool,
 }

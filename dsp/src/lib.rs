@@ -6,14 +6,20 @@
 //!
 //! Signal flow: interleaved PCM → [`StreamResampler`] (downmix, resample to [`ANALYSIS_RATE`]) →
 //! [`Stft`] (hop [`HOP`]) → [`MelFilterbank`], [`ChromaFilterbank`], [`OnsetDetector`] →
-//! [`BeatTracker`] → [`MeterTracker`] → [`FeatureFramer`] at the model's frame rate.
+//! [`BeatTracker`] → [`MeterTracker`] (beat-synchronous features, the downbeat network, the bar
+//! pointer) → [`FeatureFramer`] at the model's frame rate.
 
 pub mod analyzer;
 #[cfg(feature = "aubio")]
 pub mod aubio_tracker;
+pub mod bar_class;
+pub mod bar_features;
+pub mod bar_pointer;
 pub mod beat;
 pub mod beat_activation;
+pub mod beat_counter;
 pub mod chroma;
+pub mod downbeat_net;
 pub mod error;
 pub mod feature;
 pub mod grid;
@@ -21,25 +27,32 @@ pub mod hop;
 pub mod mel;
 pub mod meter;
 pub mod metrics;
+pub mod net_file;
 pub mod onset;
 pub mod resample;
 pub mod stft;
 pub mod tracker;
+pub mod tuning;
 
 pub use analyzer::{
     AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, OnsetEvent,
 };
+pub use bar_class::{BarClass, Level};
+pub use bar_features::{BAR_FEATURE_DIM, BarFeatures};
+pub use bar_pointer::BarPointerParams;
 pub use beat::{BeatTracker, BeatTrackerParams};
 pub use beat_activation::{
-    BEAT_INPUT_DIM, BeatActivation, BeatInput, BeatNetEnsemble, BeatNetError, BeatNetWeights,
+    BEAT_INPUT_DIM, BeatActivation, BeatInput, BeatNetEnsemble, BeatNetWeights,
 };
 pub use chroma::ChromaFilterbank;
+pub use downbeat_net::{BeatWindow, DownbeatClassifier, DownbeatNetEnsemble};
 pub use error::DspError;
 pub use feature::{FeatureFrame, FeatureFramer, FeatureLayout, predicted_stream};
 pub use grid::{BeatGrid, GridBeat};
 pub use hop::HopFrame;
 pub use mel::MelFilterbank;
 pub use meter::MeterTracker;
+pub use net_file::NetFileError;
 pub use onset::{OnsetDetector, OnsetPeakPicker};
 pub use resample::StreamResampler;
 pub use stft::Stft;

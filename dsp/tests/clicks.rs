@@ -46,6 +46,7 @@ fn analyse(rate: u32, x: &[f32]) -> Events {
         model_rate: None,
         tracker: BeatTrackerKind::Native,
         beat_params: Default::default(),
+        bar_params: Default::default(),
     })
     .unwrap();
     let mut ev = Events::default();

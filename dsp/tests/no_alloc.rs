@@ -75,6 +75,7 @@ fn count_allocations(
         model_rate: Some(30.0),
         tracker,
         beat_params: Default::default(),
+        bar_params: Default::default(),
     })
     .unwrap();
     // A drum-like signal so every event path (onsets, beats, bars, frames) is exercised.

@@ -60,6 +60,7 @@ fn run(rate: u32, channels: u16, seconds: f64, mut sample: impl FnMut(usize) -> 
         model_rate: Some(30.0),
         tracker: BeatTrackerKind::Native,
         beat_params: Default::default(),
+        bar_params: Default::default(),
     })
     .unwrap();
     let frames = (rate as f64 * seconds) as usize;

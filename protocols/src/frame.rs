@@ -48,6 +48,8 @@ pub enum AnalysisEvent {
         beats_per_bar: u32,
         /// Tempo at this beat.
         tempo_bpm: f32,
+        /// Probability the bar tracker gives this count, in [0, 1].
+        bar_confidence: f32,
     },
     /// The beat after the one just shown, announced ahead so effects can be scheduled on it.
     NextBeat {

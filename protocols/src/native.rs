@@ -122,18 +122,21 @@ impl NativeEncoder {
                 index_in_bar,
                 beats_per_bar,
                 tempo_bpm,
+                bar_confidence,
             } => {
                 let index = self.clamp_i32(index_in_bar);
                 let per_bar = self.clamp_i32(beats_per_bar);
                 let tempo = self.checked(tempo_bpm);
                 let time = self.checked64(time_s);
+                let confidence = self.checked(bar_confidence);
                 OscWriter::new(buf)
                     .string(&[&self.prefix, "/beat"])
-                    .string(&[",iiff"])
+                    .string(&[",iifff"])
                     .int(index)
                     .int(per_bar)
                     .float(tempo)
-                    .float(time);
+                    .float(time)
+                    .float(confidence);
             }
             AnalysisEvent::NextBeat {
                 time_s,
@@ -308,6 +311,7 @@ mod tests {
                     index_in_bar: 2,
                     beats_per_bar: u32::MAX,
                     tempo_bpm: 128.0,
+                    bar_confidence: 0.75,
                 },
                 "/danced/beat",
                 vec![
@@ -315,6 +319,7 @@ mod tests {
                     OscType::Int(i32::MAX),
                     OscType::Float(128.0),
                     OscType::Float(3.0),
+                    OscType::Float(0.75),
                 ],
             ),
             (
@@ -455,6 +460,7 @@ mod tests {
                     index_in_bar: 2,
                     beats_per_bar: 4,
                     tempo_bpm: 128.0,
+                    bar_confidence: 0.5,
                 },
                 "/danced/beat",
                 vec![
@@ -462,6 +468,7 @@ mod tests {
                     OscType::Int(4),
                     OscType::Float(128.0),
                     OscType::Float(3.0),
+                    OscType::Float(0.5),
                 ],
             ),
             (

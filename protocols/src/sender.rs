@@ -203,6 +203,7 @@ impl OscOutput {
                 index_in_bar: 1,
                 beats_per_bar: 4,
                 tempo_bpm: 120.0,
+                bar_confidence: 1.0,
             },
             AnalysisEvent::NextBeat {
                 time_s: 0.0,

@@ -96,6 +96,7 @@ fn non_finite_values_are_counted_for_every_layout() {
         index_in_bar: 1,
         beats_per_bar: u32::MAX,
         tempo_bpm: f32::NAN,
+        bar_confidence: 0.5,
     });
     let c = out.counters();
     assert_eq!((c.non_finite_replaced, c.clamped_values), (2, 1), "{c:?}");

@@ -120,6 +120,7 @@ fn events(i: u64) -> [AnalysisEvent; 5] {
             index_in_bar: (i % 4) as u32 + 1,
             beats_per_bar: 4,
             tempo_bpm: 120.0,
+            bar_confidence: 0.9,
         },
         AnalysisEvent::Onset {
             time_s: t,

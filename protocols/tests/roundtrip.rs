@@ -146,7 +146,7 @@ proptest! {
     ) {
         let mut enc = NativeEncoder::default();
         let events = [
-            AnalysisEvent::Beat { time_s: t, index_in_bar: 1, beats_per_bar: 4, tempo_bpm: x },
+            AnalysisEvent::Beat { time_s: t, index_in_bar: 1, beats_per_bar: 4, tempo_bpm: x, bar_confidence: y },
             AnalysisEvent::Onset { time_s: t, strength: x },
             AnalysisEvent::Tempo { bpm: x, confidence: y },
             AnalysisEvent::Chroma { time_s: t, chroma },

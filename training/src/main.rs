@@ -5,9 +5,10 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
-use training::command::{beats, dancer};
+use training::command::{beats, dancer, downbeats};
 
-/// Trains danced's networks: the neural dancer and the learned beat activation.
+/// Trains danced's networks: the neural dancer, the learned beat activation and the
+/// downbeat network.
 #[derive(Parser, Debug)]
 #[command(name = "danced-train", version, about)]
 struct Cli {
@@ -21,6 +22,8 @@ enum Command {
     Dancer(dancer::TrainArgs),
     /// Train the learned beat activation on songs with exact beats (e.g. rendered ones).
     Beats(beats::TrainBeatsArgs),
+    /// Train the downbeat network on songs whose beats carry their position in the bar.
+    Downbeats(downbeats::TrainDownbeatsArgs),
 }
 
 fn main() -> Result<()> {
@@ -33,5 +36,6 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Dancer(args) => dancer::train(&args),
         Command::Beats(args) => beats::train_beats(&args),
+        Command::Downbeats(args) => downbeats::train_downbeats(&args),
     }
 }

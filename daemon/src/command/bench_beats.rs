@@ -30,7 +30,18 @@ pub struct BenchBeatsArgs {
     /// Override native tracker tuning, e.g. `observation_beta=1.5,prior_octaves=0.8` (for tuning).
     #[arg(long, default_value = "")]
     pub beat_params: String,
+    /// Override bar pointer tuning, e.g. `jump=0.05,switch_ratio=3` (for tuning).
+    #[arg(long, default_value = "")]
+    pub bar_params: String,
+    /// Further folders of songs rendered by `synth_beats.py`, each scored as a set named after
+    /// the folder.
+    #[arg(long, num_args = 1..)]
+    pub songs: Vec<PathBuf>,
 }
+
+/// A song's meter counts as right when at least this share of its beats after the first four
+/// bars report it.
+const METER_RIGHT_SHARE: f64 = 0.9;
 
 /// Runs `danced bench beats`.
 pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
@@ -49,20 +60,31 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
     } else {
         args.tracker.iter().map(|&t| t.into()).collect()
     };
+    let extra = args.songs.iter().map(|dir| {
+        let name = dir.file_name().map_or_else(
+            || dir.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        bench::rendered_set(&name, dir)
+    });
     let sets: Vec<bench::BenchSet> = [
         bench::synth_set(&args.data),
         bench::tang_set(&args.data),
         bench::madmom_set(&args.data),
     ]
     .into_iter()
-    .filter(|s| args.set.is_empty() || args.set.iter().any(|n| n == s.name))
+    .chain(extra)
+    .filter(|s| args.set.is_empty() || args.set.contains(&s.name))
     .filter(|s| !s.items.is_empty())
     .collect();
     if sets.is_empty() {
         bail!("no annotated audio found under {}", args.data.display());
     }
-    let params = dsp::beat::BeatTrackerParams::default()
+    let beat_params = dsp::beat::BeatTrackerParams::default()
         .with_overrides(&args.beat_params)
+        .map_err(anyhow::Error::msg)?;
+    let bar_params = dsp::BarPointerParams::default()
+        .with_overrides(&args.bar_params)
         .map_err(anyhow::Error::msg)?;
     let total: usize = sets.iter().map(|s| s.items.len()).sum::<usize>() * trackers.len();
     let pb = count_bar(total as u64);
@@ -72,7 +94,13 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
         let mut row = vec![tracker.name().to_string()];
         let mut all = Vec::new();
         for set in &sets {
-            let scores = bench::run_set(set, tracker, params, args.jobs, &|name| {
+            let options = crate::offline::AnalyzeOptions {
+                tracker,
+                beat_params,
+                bar_params,
+                ..Default::default()
+            };
+            let scores = bench::run_set(set, options, args.jobs, &|name| {
                 pb.set_message(name.to_string());
                 pb.inc(1);
             });
@@ -89,6 +117,22 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
                 extra += &format!(
                     ", downbeat F {:.3}",
                     bench::mean(&scores, |s| s.downbeat_f.unwrap_or(0.0))
+                );
+                let weak = scores
+                    .iter()
+                    .filter(|s| s.f_measure >= 0.9 && s.downbeat_f.is_some_and(|f| f < 0.5))
+                    .count();
+                extra += &format!(" ({weak} below 0.5 with beat F ≥ 0.9)");
+            }
+            if scores.iter().any(|s| s.meter_right.is_some()) {
+                let right = scores
+                    .iter()
+                    .filter(|s| s.meter_right.is_some_and(|m| m >= METER_RIGHT_SHARE))
+                    .count();
+                extra += &format!(
+                    ", meter right on {right} of {} songs ({:.1} % of beats)",
+                    scores.len(),
+                    100.0 * bench::mean(&scores, |s| s.meter_right.unwrap_or(0.0))
                 );
             }
             if scores.iter().any(|s| s.onset_f.is_some()) {
@@ -117,6 +161,10 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
     println!(
         "Beats decided ≤ {:.0} ms after they happen; mean F / CMLt / AMLt (±70 ms, first 5 s skipped).",
         bench::MAX_DECISION_LAG_S * 1000.0
+    );
+    println!(
+        "A song's meter is right when ≥ {:.0} % of its beats after the first four bars report it.",
+        METER_RIGHT_SHARE * 100.0
     );
     let header: Vec<String> = sets
         .iter()

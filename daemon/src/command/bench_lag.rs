@@ -83,7 +83,7 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
             audio: ReplayAudio::demo(args.seconds + 1.0),
         }]);
     }
-    let steady = steady_songs(&set);
+    let steady = crate::bench::steady_songs(&set);
     let n = args.songs.max(1).min(steady.len());
     let picked: Vec<_> = (0..n)
         .map(|k| steady[k * (steady.len() - 1) / (n - 1).max(1)])
@@ -102,21 +102,6 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
 
 fn song_info(item: &crate::bench::BenchItem) -> Option<crate::bench::SynthSongInfo> {
     crate::bench::SynthSongInfo::read(&item.audio)
-}
-
-/// The set's constant-tempo songs without a drumless intro, 70–170 BPM, slowest first.
-fn steady_songs(set: &crate::bench::BenchSet) -> Vec<(f64, &crate::bench::BenchItem)> {
-    let mut steady: Vec<(f64, &crate::bench::BenchItem)> = set
-        .items
-        .iter()
-        .filter_map(|i| {
-            let info = song_info(i)?;
-            (info.constant && !info.has_intro() && (70.0..=170.0).contains(&info.bpm))
-                .then_some((info.bpm, i))
-        })
-        .collect();
-    steady.sort_by(|a, b| a.0.total_cmp(&b.0));
-    steady
 }
 
 /// A song that may be joined to another: tempo, name, audio, beats, quiet section.

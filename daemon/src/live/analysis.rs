@@ -241,6 +241,7 @@ fn live_config(rate: u32, channels: u16, model_rate: f64) -> AnalyzerConfig {
         model_rate: Some(model_rate),
         tracker: dsp::BeatTrackerKind::Native,
         beat_params: Default::default(),
+        bar_params: Default::default(),
     }
 }
 

@@ -50,6 +50,7 @@ impl BeatClock {
                 index_in_bar: b.index_in_bar,
                 beats_per_bar: grid.beats_per_bar,
                 tempo_bpm,
+                bar_confidence: grid.bar_confidence,
             });
             self.last_beat_s = b.time_s;
         }
@@ -80,6 +81,7 @@ mod tests {
             period_s: 0.5,
             next_index_in_bar: 1,
             beats_per_bar: 4,
+            bar_confidence: 1.0,
             locked: true,
         };
         let mut clock = BeatClock::default();

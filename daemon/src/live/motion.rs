@@ -260,6 +260,7 @@ mod tests {
             period_s: 0.5,
             next_index_in_bar: 2,
             beats_per_bar: 4,
+            bar_confidence: 1.0,
             locked: true,
         }
     }

@@ -68,13 +68,30 @@ pub fn receive(
     socket: UdpSocket,
     until: Instant,
 ) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
+    receive_for(socket, move || Instant::now() < until)
+}
+
+/// Collects every datagram arriving on a socket while `listening` holds, with its arrival time.
+pub fn receive_while(
+    socket: UdpSocket,
+    listening: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
+    receive_for(socket, move || {
+        listening.load(std::sync::atomic::Ordering::Relaxed)
+    })
+}
+
+fn receive_for(
+    socket: UdpSocket,
+    go_on: impl Fn() -> bool + Send + 'static,
+) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
     std::thread::spawn(move || {
         socket
             .set_read_timeout(Some(Duration::from_millis(50)))
             .unwrap();
         let mut got = Vec::new();
         let mut buf = vec![0u8; 65_536];
-        while Instant::now() < until {
+        while go_on() {
             if let Ok(n) = socket.recv(&mut buf) {
                 got.push((Instant::now(), buf[..n].to_vec()));
             }

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 use daemon::offline::{AnalyzeOptions, analyze_file};
 use daemon::output::{read_times, write_atomic};
@@ -15,6 +15,7 @@ use dsp::BEAT_INPUT_DIM;
 use dsp::BeatNetEnsemble;
 
 use crate::beat_training::{BeatSong, BeatTrainConfig, train_beat_activation};
+use crate::song_files::{EnsembleArgs, annotated_songs};
 
 /// Options of `danced-train beats`.
 #[derive(Args, Debug, Clone)]
@@ -44,18 +45,8 @@ pub struct TrainBeatsArgs {
     /// Augmentation: standard deviation of a random log gain per sequence and band group.
     #[arg(long, default_value_t = BeatTrainConfig::default().gain_jitter)]
     pub gain_jitter: f32,
-    /// Every this many songs, one is held out for validation.
-    #[arg(long, default_value_t = 10)]
-    pub valid_every: usize,
-    /// Seed of crops and initial weights (member i of the ensemble uses seed + i).
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Networks trained (one after the other, each with its own seed) and averaged.
-    #[arg(long, default_value_t = 3)]
-    pub ensemble: usize,
-    /// Songs analysed in parallel.
-    #[arg(long, default_value_t = 2)]
-    pub jobs: usize,
+    #[command(flatten)]
+    pub ensemble: EnsembleArgs,
 }
 
 /// Streams one song through the analysis and pairs its hops with beat targets.
@@ -78,37 +69,15 @@ fn load_song(audio: &Path, beats: &Path) -> Result<BeatSong> {
 
 /// Runs `danced-train beats`.
 pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
-    let mut pairs = Vec::new();
-    for folder in &args.songs {
-        let dir = std::fs::read_dir(folder)
-            .with_context(|| format!("reading song folder {}", folder.display()))?;
-        let mut found = Vec::new();
-        for entry in dir {
-            let p = entry?.path();
-            let audio = p
-                .extension()
-                .is_some_and(|e| ["flac", "wav", "mp3", "ogg"].iter().any(|x| e == *x));
-            if audio && p.with_extension("beats").exists() {
-                found.push(p);
-            }
-        }
-        found.sort();
-        pairs.extend(found);
-    }
-    if pairs.len() < 2 {
-        bail!(
-            "need at least two songs with .beats files in the song folders, found {}",
-            pairs.len()
-        );
-    }
+    let pairs = annotated_songs(&args.songs)?;
     let t = Instant::now();
-    let loaded = daemon::pool::parallel_map(&pairs, args.jobs.max(1), |p| {
+    let loaded = daemon::pool::parallel_map(&pairs, args.ensemble.jobs.max(1), |p| {
         load_song(p, &p.with_extension("beats"))
     });
     let (mut train, mut valid) = (Vec::new(), Vec::new());
     for (i, song) in loaded.into_iter().enumerate() {
         let song = song?;
-        if args.valid_every > 1 && i % args.valid_every == args.valid_every - 1 {
+        if args.ensemble.held_out(i) {
             valid.push(song);
         } else {
             train.push(song);
@@ -130,14 +99,14 @@ pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
         sequence: args.sequence,
         batch: args.batch,
         gain_jitter: args.gain_jitter,
-        seed: args.seed,
+        seed: args.ensemble.seed,
         ..BeatTrainConfig::default()
     };
     let t = Instant::now();
     let mut nets = Vec::new();
-    for member in 0..args.ensemble.max(1) {
+    for member in 0..args.ensemble.members() {
         let config = BeatTrainConfig {
-            seed: args.seed + member as u64,
+            seed: args.ensemble.member_seed(member),
             ..config.clone()
         };
         nets.push(train_beat_activation(

@@ -2,3 +2,4 @@
 
 pub mod beats;
 pub mod dancer;
+pub mod downbeats;
