@@ -15,11 +15,8 @@ use dsp::{BarFeatures, BarPointerParams, DownbeatClassifier};
 
 use crate::device::training_device;
 use crate::layers::values;
+use dsp::metrics::BEAT_TOLERANCE_S;
 use model::neural::rng::Rng;
-
-/// A tracked beat counts as an annotated one within this distance, seconds (the F-measure's
-/// tolerance).
-pub const MATCH_TOLERANCE_S: f64 = 0.07;
 
 /// Training examples: network inputs `[n][DOWNBEAT_INPUT_DIM]` (flat) and a class per row.
 #[derive(Clone, Debug, Default)]
@@ -94,7 +91,7 @@ fn label(tracked: &[f64], k: usize, reference: &[(f64, usize)], meter: usize) ->
             .total_cmp(&(reference[b].0 - t).abs())
     })?;
     let ratio = local_interval(tracked, k)? / local_interval(&annotated, j)?;
-    let on_beat = (reference[j].0 - t).abs() <= MATCH_TOLERANCE_S;
+    let on_beat = (reference[j].0 - t).abs() <= BEAT_TOLERANCE_S;
     let position = reference[j].1;
     let class = |level, position| {
         class_index(BarClass {
@@ -113,7 +110,7 @@ fn label(tracked: &[f64], k: usize, reference: &[(f64, usize)], meter: usize) ->
         let before = reference.iter().rposition(|r| r.0 < t)?;
         let after = reference.get(before + 1)?;
         let mid = (reference[before].0 + after.0) / 2.0;
-        ((mid - t).abs() <= MATCH_TOLERANCE_S)
+        ((mid - t).abs() <= BEAT_TOLERANCE_S)
             .then_some(())
             .and_then(|_| class(Level::Double, 2 * reference[before].1))
     } else if (1.6..=2.5).contains(&ratio) && on_beat {
@@ -403,25 +400,19 @@ mod tests {
             ex.add_song(&f, &reference, 4);
             ex.classes
         };
-        let double = at((0..20).map(|k| 1.0 + k as f64 * 0.25).collect());
-        let d = |p| {
+        let class = |level, position| {
             class_index(BarClass {
-                level: Level::Double,
+                level,
                 meter: 4,
-                position: p,
+                position,
             })
             .unwrap()
         };
+        let double = at((0..20).map(|k| 1.0 + k as f64 * 0.25).collect());
+        let d = |p| class(Level::Double, p);
         assert_eq!(&double[..4], &[d(5), d(6), d(7), d(8)]);
         let half = at((0..8).map(|k| 2.5 + k as f64 * 1.0).collect());
-        let h = |p| {
-            class_index(BarClass {
-                level: Level::Half,
-                meter: 4,
-                position: p,
-            })
-            .unwrap()
-        };
+        let h = |p| class(Level::Half, p);
         assert_eq!(&half[..3], &[h(2), h(4), h(2)]);
     }
 }
