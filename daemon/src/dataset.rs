@@ -9,7 +9,7 @@ use model::rig::{JOINT_COUNT, Joint};
 use model::tang_fit::fit_dance;
 use model::tang2018::{TANG_FPS, TangDance, dance_dirs, load_dance};
 
-use crate::offline::{AnalyzeOptions, analyze_file};
+use crate::offline::{AnalyzeOptions, analyze_file, analyze_file_at_speed};
 use crate::output::read_times;
 
 /// One dance in the audit table.
@@ -389,10 +389,25 @@ pub fn is_validation(name: &str, all_names: &[String]) -> bool {
 /// `crate::horizon`), frame i of the motion paired with the music frame at song time
 /// `start + i / 25`. Frames outside the song are dropped.
 pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<BuiltDance, String> {
+    build_dance_at_speeds(dance, data, validation, &[1.0])?
+        .pop()
+        .ok_or_else(|| format!("{}: nothing built", dance.name))
+}
+
+/// [`build_dance`] once per entry of `speeds`: the dance and its song played that many times
+/// as fast together (the song varispeed, its features from the streaming analysis of the
+/// sped-up audio; the poses interpolated), so a dance of 87 BPM also teaches 70 and 130 BPM.
+/// A sped-up dance is named `NAME@SPEED` (its style letter stays). The rig is fitted once.
+pub fn build_dance_at_speeds(
+    dance: &TangDance,
+    data: &Path,
+    validation: bool,
+    speeds: &[f64],
+) -> Result<Vec<BuiltDance>, String> {
     let fit = fit_dance(dance).map_err(|e| e.to_string())?;
     let mut motion = Vec::new();
     model::motion::encode(&fit.poses, &mut motion);
-    let mut built = BuiltDance {
+    let built = BuiltDance {
         name: dance.name.clone(),
         style: dance.style,
         validation,
@@ -403,33 +418,72 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
         hip_height_m: fit.skeleton.hip_height(),
     };
     let Some(audio) = &dance.audio else {
-        return Ok(built);
+        return Ok(vec![built]);
     };
     let positions = fit.skeleton.trajectory(&fit.poses);
     let track = JointTrack::new(&positions, JOINT_COUNT, fit.fps).map_err(|e| e.to_string())?;
     let start_s = align(dance, &track, data)?.estimate.start_s;
-    let opts = AnalyzeOptions::native(Some(TANG_FPS));
-    let a = analyze_file(audio, opts, &mut |_, _| {}).map_err(|e| e.to_string())?;
-    // What a live dancer hears at each frame: the analysis of a few frames earlier, its beat
-    // grid extrapolated to the frame.
-    let heard = dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS));
-    let first = (start_s * TANG_FPS).round() as i64;
-    let mut keep_from = None;
-    for i in 0..built.motion.len() {
-        let k = first + i as i64;
-        if k < 0 {
-            continue;
+    let mut out = Vec::with_capacity(speeds.len());
+    for &speed in speeds {
+        if !(speed.is_finite() && speed > 0.0) {
+            return Err(format!("{}: speed {speed} is not positive", dance.name));
         }
-        let Some(frame) = heard.get(k as usize) else {
-            break;
-        };
-        keep_from.get_or_insert(i);
-        built.music.push(*frame);
+        let mut b = built.clone();
+        if speed != 1.0 {
+            b.name = format!("{}@{speed}", dance.name);
+            let poses = resample_poses(&fit.poses, speed);
+            b.motion.clear();
+            model::motion::encode(&poses, &mut b.motion);
+        }
+        let opts = AnalyzeOptions::native(Some(TANG_FPS));
+        let a =
+            analyze_file_at_speed(audio, opts, speed, &mut |_, _| {}).map_err(|e| e.to_string())?;
+        // What a live dancer hears at each frame: the analysis of a few frames earlier, its
+        // beat grid extrapolated to the frame.
+        let heard = dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS));
+        let first = (start_s / speed * TANG_FPS).round() as i64;
+        let mut keep_from = None;
+        for i in 0..b.motion.len() {
+            let k = first + i as i64;
+            if k < 0 {
+                continue;
+            }
+            let Some(frame) = heard.get(k as usize) else {
+                break;
+            };
+            keep_from.get_or_insert(i);
+            b.music.push(*frame);
+        }
+        let from = keep_from.unwrap_or(b.motion.len());
+        b.motion = b.motion[from..from + b.music.len()].to_vec();
+        b.start_s = Some((first + from as i64) as f64 / TANG_FPS);
+        out.push(b);
     }
-    let from = keep_from.unwrap_or(built.motion.len());
-    built.motion = built.motion[from..from + built.music.len()].to_vec();
-    built.start_s = Some((first + from as i64) as f64 / TANG_FPS);
-    Ok(built)
+    Ok(out)
+}
+
+/// `poses` (at any fixed rate) played `speed` times as fast at the same rate: frame j shows
+/// the original at frame j·speed, interpolated (root lerp, rotations slerp).
+pub fn resample_poses(poses: &[model::rig::Pose], speed: f64) -> Vec<model::rig::Pose> {
+    if poses.is_empty() || !(speed.is_finite() && speed > 0.0) {
+        return poses.to_vec();
+    }
+    let last = poses.len() - 1;
+    let frames = (last as f64 / speed).floor() as usize + 1;
+    let mut pose = model::rig::Pose::rest();
+    (0..frames)
+        .map(|j| {
+            let x = j as f64 * speed;
+            let a = (x.floor() as usize).min(last);
+            let b = (a + 1).min(last);
+            let w = (x - a as f64) as f32;
+            if w == 0.0 {
+                return poses[a];
+            }
+            crate::live::scheduler::blend(&poses[a], &poses[b], w, &mut pose);
+            pose
+        })
+        .collect()
 }
 
 /// Every dance under `data/tang2018` that `wanted` accepts, built by [`build_dances`] with
@@ -437,6 +491,17 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
 pub fn build_all(
     data: &Path,
     jobs: usize,
+    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
+    bar: bool,
+) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
+    build_all_at_speeds(data, jobs, &[1.0], wanted, bar)
+}
+
+/// [`build_all`], every training dance also at each of `speeds` ([`build_dances_at_speeds`]).
+pub fn build_all_at_speeds(
+    data: &Path,
+    jobs: usize,
+    speeds: &[f64],
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     bar: bool,
 ) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
@@ -448,7 +513,7 @@ pub fn build_all(
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let built = build_dances(data, &dances, jobs, wanted, |name| {
+    let built = build_dances_at_speeds(data, &dances, jobs, speeds, wanted, |name| {
         pb.set_message(name.to_string());
         pb.inc(1);
     });
@@ -467,16 +532,37 @@ pub fn build_dances(
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     progress: impl Fn(&str) + Sync,
 ) -> Vec<(String, Result<BuiltDance, String>)> {
+    build_dances_at_speeds(data, dances, jobs, &[1.0], wanted, progress)
+}
+
+/// [`build_dances`] with every training dance also built at each of `speeds` (see
+/// [`build_dance_at_speeds`]; validation dances are built as they are): one entry per dance
+/// and speed, the dance itself first.
+pub fn build_dances_at_speeds(
+    data: &Path,
+    dances: &[(PathBuf, String, bool)],
+    jobs: usize,
+    speeds: &[f64],
+    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
+    progress: impl Fn(&str) + Sync,
+) -> Vec<(String, Result<BuiltDance, String>)> {
     let results = crate::pool::parallel_map(dances, jobs.max(1), |(dir, name, validation)| {
+        let mut all = vec![1.0];
+        if !*validation {
+            all.extend(speeds.iter().copied().filter(|&s| s != 1.0));
+        }
         let r = match load_dance(dir) {
             Ok(d) if !wanted(&d, *validation) => None,
-            Ok(d) => Some(build_dance(&d, data, *validation)),
-            Err(e) => Some(Err(e.to_string())),
+            Ok(d) => Some(match build_dance_at_speeds(&d, data, *validation, &all) {
+                Ok(built) => built.into_iter().map(|b| (b.name.clone(), Ok(b))).collect(),
+                Err(e) => vec![(name.clone(), Err(e))],
+            }),
+            Err(e) => Some(vec![(name.clone(), Err(e.to_string()))]),
         };
         progress(name);
-        r.map(|r| (name.clone(), r))
+        r
     });
-    results.into_iter().flatten().collect()
+    results.into_iter().flatten().flatten().collect()
 }
 
 /// Writes the dances as one `.npz` (arrays `<name>/motion` and, with music, `<name>/music`,
@@ -537,4 +623,43 @@ pub fn write_dataset(path: &Path, dances: &[BuiltDance]) -> Result<(), String> {
     );
     crate::output::write_atomic(&path.with_extension("json"), manifest.as_bytes())
         .map_err(|e| format!("{}: {e}", path.with_extension("json").display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Quat, Vec3};
+    use model::rig::Pose;
+
+    fn walk(frames: usize) -> Vec<Pose> {
+        (0..frames)
+            .map(|i| {
+                let mut p = Pose::rest();
+                p.root_position = Vec3::new(0.1 * i as f32, 0.9, 0.0);
+                p.set_rotation(Joint::LeftUpperArm, Quat::from_rotation_x(0.05 * i as f32));
+                p
+            })
+            .collect()
+    }
+
+    #[test]
+    fn resampled_poses_play_the_dance_faster_or_slower_with_interpolation() {
+        let poses = walk(11);
+        let fast = resample_poses(&poses, 2.0);
+        assert_eq!(fast.len(), 6);
+        for (j, p) in fast.iter().enumerate() {
+            assert_eq!(*p, poses[2 * j]);
+        }
+        let slow = resample_poses(&poses, 0.5);
+        assert_eq!(slow.len(), 21);
+        // Frame 3 of the slow dance is halfway between frames 1 and 2.
+        assert!((slow[3].root_position.x - 0.15).abs() < 1e-6);
+        let angle = slow[3]
+            .rotation(Joint::LeftUpperArm)
+            .angle_between(Quat::IDENTITY);
+        assert!((angle - 0.075).abs() < 1e-4, "{angle}");
+        assert_eq!(resample_poses(&poses, 1.0), poses);
+        assert_eq!(resample_poses(&poses, f64::NAN), poses);
+        assert!(resample_poses(&[], 1.5).is_empty());
+    }
 }

@@ -16,6 +16,7 @@
 //! - Freezes: the default freeze detector, summed over dances. Foot skating: mean toe speed in
 //!   contact, the floor of each dance at the 5th percentile of its toes' heights.
 
+use model::style::{DanceStyle, StyleRequest};
 use std::path::Path;
 
 use anyhow::{Context, Result};
@@ -86,21 +87,20 @@ pub struct EvalSet {
     styles: Option<StyleClassifier>,
 }
 
-/// The tang2018 styles, in the order of its dance names' letters (C, R, T, W).
-pub const STYLES: [&str; 4] = ["cha-cha", "rumba", "tango", "waltz"];
+/// The tang2018 styles' names, in [`DanceStyle`] index order.
+pub const STYLES: [&str; 4] = [
+    DanceStyle::ChaCha.name(),
+    DanceStyle::Rumba.name(),
+    DanceStyle::Tango.name(),
+    DanceStyle::Waltz.name(),
+];
 
 /// Length of the windows the style classifier names, seconds.
 pub const STYLE_WINDOW_S: f64 = 10.0;
 
-/// The style of a tang2018 dance by its name (`DANCE_W_3` is a waltz).
+/// The style index of a tang2018 dance by its name (`DANCE_W_3` is a waltz).
 pub fn style_of(dance: &str) -> Option<usize> {
-    match model::tang2018::style_letter(dance)? {
-        'C' => Some(0),
-        'R' => Some(1),
-        'T' => Some(2),
-        'W' => Some(3),
-        _ => None,
-    }
+    DanceStyle::of_tang_dance(dance).map(DanceStyle::index)
 }
 
 /// Nearest centroid on standardised kinetic features of [`STYLE_WINDOW_S`] windows, fit on
@@ -411,6 +411,39 @@ impl EvalSet {
         Some(confusion)
     }
 
+    /// The style classifier's names for every [`STYLE_WINDOW_S`] window of `source` dancing
+    /// every validation song with each style requested in turn: `confusion[requested][named]`.
+    pub fn requested_style_confusion(
+        &self,
+        source: &mut dyn MotionSource,
+        temperature: f32,
+        seed: u64,
+    ) -> Option<[[usize; 4]; 4]> {
+        let classifier = self.styles.as_ref()?;
+        let skeleton = Skeleton::default_adult();
+        let mut confusion = [[0usize; 4]; 4];
+        for style in DanceStyle::ALL {
+            for d in &self.validation {
+                let look = source.lookahead_frames();
+                source.reset(seed);
+                let frames = d.music.len().saturating_sub(look);
+                let m =
+                    crate::motion_lag::dance_stream(source, &d.music, 0, frames, |_| Controls {
+                        temperature,
+                        style: StyleRequest::Style(style),
+                        ..Controls::default()
+                    });
+                let p = skeleton.trajectory(&m);
+                for w in windows_of(&p, (STYLE_WINDOW_S * TANG_FPS) as usize) {
+                    if let Some(named) = classifier.classify(&w) {
+                        confusion[style.index()][named] += 1;
+                    }
+                }
+            }
+        }
+        Some(confusion)
+    }
+
     /// Freezes in [`LONG_RUN_S`] of dancing to every validation song, its music looped.
     pub fn long_run_freezes(
         &self,
@@ -490,6 +523,7 @@ pub fn dance_to(
         temperature,
         key_pose: target_at(cues, i, lead),
         beat_accent: None,
+        style: StyleRequest::Auto,
     })
 }
 
@@ -690,8 +724,13 @@ pub fn retrieval(library: ClipLibrary) -> Result<RetrievalDancer> {
 
 /// A style confusion matrix as a table, with the share named right.
 pub fn style_table(system: &str, confusion: &[[usize; 4]; 4]) -> String {
+    style_table_of(system, "song's style", confusion)
+}
+
+/// [`style_table`] with its rows named `rows` (the song's style, or the style requested).
+pub fn style_table_of(system: &str, rows: &str, confusion: &[[usize; 4]; 4]) -> String {
     let mut s = format!(
-        "| {system}: song's style ↓, named → | {} | named right |\n| --- |{}\n",
+        "| {system}: {rows} ↓, named → | {} | named right |\n| --- |{}\n",
         STYLES.join(" | "),
         " --- |".repeat(STYLES.len() + 1)
     );

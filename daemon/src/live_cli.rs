@@ -144,6 +144,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         temperature: config.dancer.temperature,
         transition_beats: config.dancer.transition_beats,
         beat_accent: Some(config.dancer.beat_accent),
+        style: config.dancer.style_request(),
         realtime: config.output.realtime,
         ..PipelineSettings::default()
     };

@@ -185,10 +185,28 @@ pub fn analyze_file(
     options: AnalyzeOptions,
     progress: &mut dyn FnMut(f64, Option<f64>),
 ) -> Result<FileAnalysis, AnalyzeError> {
+    analyze_file_at_speed(path, options, 1.0, progress)
+}
+
+/// [`analyze_file`] of the song played `speed` times as fast (varispeed, as a turntable's
+/// pitch fader or a tape does: tempo and pitch move together), by declaring its samples at
+/// `speed` times their rate; times in the result are the sped-up song's.
+pub fn analyze_file_at_speed(
+    path: &Path,
+    options: AnalyzeOptions,
+    speed: f64,
+    progress: &mut dyn FnMut(f64, Option<f64>),
+) -> Result<FileAnalysis, AnalyzeError> {
     let decode_start = Instant::now();
     let mut reader = AudioFileReader::open(path)?;
     let open_time = decode_start.elapsed();
-    let (rate, channels) = (reader.sample_rate(), reader.channels());
+    let speed = if speed.is_finite() && speed > 0.0 {
+        speed
+    } else {
+        1.0
+    };
+    let rate = (reader.sample_rate() as f64 * speed).round().max(1.0) as u32;
+    let channels = reader.channels();
     let total_s = reader.total_frames().map(|f| f as f64 / rate as f64);
     let mut result = stream(
         path.display().to_string(),

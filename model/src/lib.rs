@@ -15,5 +15,6 @@ pub mod retrieval;
 pub mod rig;
 pub mod rotation;
 pub mod source;
+pub mod style;
 pub mod tang2018;
 pub mod tang_fit;

@@ -16,6 +16,7 @@ use dsp::feature::FEATURE_DIM;
 use glam::Quat;
 
 use crate::rig::{JOINT_COUNT, Pose};
+use crate::style::StyleRequest;
 
 /// A pose the performer asks the dancer to reach at a given moment.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -36,15 +37,18 @@ pub struct Controls {
     /// Depth of the beat accent, overriding the source's own (None keeps it; sources that
     /// time their motion otherwise ignore it).
     pub beat_accent: Option<f32>,
+    /// The style to dance (sources without a style input ignore it).
+    pub style: StyleRequest,
 }
 
 impl Default for Controls {
-    /// Deterministic choices and no key pose.
+    /// Deterministic choices, no key pose, the style the music suggests.
     fn default() -> Self {
         Controls {
             temperature: 0.0,
             key_pose: None,
             beat_accent: None,
+            style: StyleRequest::Auto,
         }
     }
 }
@@ -70,6 +74,11 @@ pub trait MotionSource {
 
     /// Starts a new performance from scratch, seeding any randomness with `seed`.
     fn reset(&mut self, seed: u64);
+
+    /// The style danced at the last frame (`None`: the source has no style input).
+    fn style(&self) -> Option<crate::style::DanceStyle> {
+        None
+    }
 
     /// How often each of its safety nets acted since the last reset (`None`: it has none).
     fn safety_counts(&self) -> Option<crate::neural::safety::SafetyCounts> {

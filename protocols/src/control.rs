@@ -82,6 +82,9 @@ impl TryFrom<String> for Quantize {
     }
 }
 
+/// What `/style N` and a MIDI style target's values 0–4 name.
+pub const STYLE_NUMBERS: [&str; 5] = ["auto", "cha-cha", "rumba", "tango", "waltz"];
+
 /// A live control change from OSC or MIDI.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ControlEvent {
@@ -102,6 +105,10 @@ pub enum ControlEvent {
     TransitionBeats(f32),
     /// Seed of the dancer's style randomness.
     StyleSeed(u64),
+    /// The dance style to dance, by name (`auto`, `cha-cha`, `rumba`, `tango`, `waltz`;
+    /// lower-cased here, resolved and counted by the receiver), or a number: 0 = auto, 1–4 =
+    /// those styles in that order.
+    DanceStyle(String),
     /// Freeze the dance.
     Pause,
     /// Unfreeze the dance.
@@ -248,6 +255,17 @@ impl ControlParser {
                     "/resume" => ControlEvent::Resume,
                     _ => ControlEvent::ClearKeyPose,
                 }
+            }
+            "/style" => {
+                let name = match args.as_slice() {
+                    [OscType::String(s)] if !s.trim().is_empty() => s.trim().to_lowercase(),
+                    [a] => match as_int(a)? {
+                        n @ 0..=4 => STYLE_NUMBERS[n as usize].to_string(),
+                        _ => return Err(Reject::BadArguments),
+                    },
+                    _ => return Err(Reject::BadArguments),
+                };
+                ControlEvent::DanceStyle(name)
             }
             "/transition" => {
                 let beats = one_float(args)?;
@@ -472,6 +490,21 @@ mod tests {
                 ControlEvent::TransitionBeats(2.0),
             ),
             (
+                msg(
+                    "/danced/control/style",
+                    vec![OscType::String(" Cha-Cha ".into())],
+                ),
+                ControlEvent::DanceStyle("cha-cha".into()),
+            ),
+            (
+                msg("/danced/control/style", vec![OscType::Int(4)]),
+                ControlEvent::DanceStyle("waltz".into()),
+            ),
+            (
+                msg("/danced/control/style", vec![OscType::Float(0.0)]),
+                ControlEvent::DanceStyle("auto".into()),
+            ),
+            (
                 msg("/danced/control/seed", vec![OscType::Int(1234)]),
                 ControlEvent::StyleSeed(1234),
             ),
@@ -563,6 +596,9 @@ mod tests {
             msg("/danced/control/keypose", vec![s("a"), s("bar"), s("x")]),
             msg("/danced/control/transition", vec![OscType::Float(0.0)]),
             msg("/danced/control/transition", vec![OscType::Float(-1.0)]),
+            msg("/danced/control/style", vec![]),
+            msg("/danced/control/style", vec![OscType::Int(5)]),
+            msg("/danced/control/style", vec![s(" ")]),
             msg("/danced/control/seed", vec![OscType::Float(-3.0)]),
             msg("/danced/control/seed", vec![OscType::Float(0.5)]),
             msg("/danced/control/tempo", vec![OscType::Float(20.0)]),

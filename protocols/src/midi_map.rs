@@ -1,7 +1,7 @@
 //! What MIDI input means to the dancer, loaded from a TOML file (format in the crate README).
 
 use crate::control::{
-    BEAT_ACCENT_RANGE, ControlEvent, Quantize, TEMPERATURE_RANGE, TEMPO_HINT_RANGE,
+    BEAT_ACCENT_RANGE, ControlEvent, Quantize, STYLE_NUMBERS, TEMPERATURE_RANGE, TEMPO_HINT_RANGE,
 };
 use crate::error::ProtocolError;
 use crate::midi::{MidiMessage, MidiParser};
@@ -24,6 +24,9 @@ pub enum CcTarget {
     Transition,
     /// Depth of the beat accent.
     Accent,
+    /// Dance style: the controller's travel in five equal zones, auto, cha-cha, rumba, tango,
+    /// waltz (`min` and `max` are not used).
+    Style,
 }
 
 /// One note → key pose rule as written in the file.
@@ -48,9 +51,11 @@ pub struct CcRule {
     pub controller: u8,
     /// The parameter it sets.
     pub target: CcTarget,
-    /// Value at controller value 0.
+    /// Value at controller value 0 (0 when absent, as a `style` rule leaves it).
+    #[serde(default)]
     pub min: f32,
-    /// Value at controller value 127 (may be below `min` to invert the knob).
+    /// Value at controller value 127 (may be below `min` to invert the knob; 0 when absent).
+    #[serde(default)]
     pub max: f32,
     /// Channel 1..=16 this rule listens to; the map's `channel` when absent.
     pub channel: Option<u8>,
@@ -187,6 +192,10 @@ impl MidiMap {
                         CcTarget::Accent => ControlEvent::BeatAccent(
                             x.clamp(BEAT_ACCENT_RANGE.0, BEAT_ACCENT_RANGE.1),
                         ),
+                        CcTarget::Style => {
+                            let zone = usize::from(value.min(127)) * STYLE_NUMBERS.len() / 128;
+                            ControlEvent::DanceStyle(STYLE_NUMBERS[zone].to_string())
+                        }
                     });
                 }
             }
@@ -383,6 +392,14 @@ mod tests {
             map(&mut m, cc(71, 127)),
             vec![ControlEvent::BeatAccent(0.6)]
         );
+        // CC 75 picks the style in five zones: auto at the bottom, waltz at the top.
+        let style = |name: &str| vec![ControlEvent::DanceStyle(name.into())];
+        assert_eq!(map(&mut m, cc(75, 0)), style("auto"));
+        assert_eq!(map(&mut m, cc(75, 25)), style("auto"));
+        assert_eq!(map(&mut m, cc(75, 26)), style("cha-cha"));
+        assert_eq!(map(&mut m, cc(75, 64)), style("rumba"));
+        assert_eq!(map(&mut m, cc(75, 90)), style("tango"));
+        assert_eq!(map(&mut m, cc(75, 127)), style("waltz"));
         assert!(map(&mut m, cc(7, 64)).is_empty());
         assert_eq!(
             map(

@@ -164,6 +164,11 @@ fn stepping_the_dancer_does_not_allocate() {
                 }),
                 // The accent knob turned live, as a performer would.
                 beat_accent: Some((i % 90) as f32 / 100.0),
+                // And the style switched live, through every style and auto.
+                style: match i % 250 / 50 {
+                    4 => model::style::StyleRequest::Auto,
+                    k => model::style::StyleRequest::Style(model::style::DanceStyle::ALL[k]),
+                },
             };
             dancer.step(&music[i..=i + look], &controls, &mut pose);
         }

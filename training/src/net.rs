@@ -5,57 +5,145 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
 use crate::flow::Flow;
+use crate::layers::Dense;
 use crate::transformer::Transformer;
 use model::motion::MOTION_FEATURE_DIM;
 use model::neural::config::NetConfig;
 use model::neural::tensors::{NamedTensors, WeightError};
 
-/// Transformer plus flow head.
+/// Horizons of the auxiliary heads, frames (0.2, 0.4 and 1 s at 25 fps): the context must
+/// predict where the dance will be, not only the next frame, which the past alone already
+/// predicts to the data's noise floor (so music and key poses added nothing to the one-step
+/// likelihood).
+pub const AUX_HORIZONS: [usize; 3] = [5, 10, 25];
+
+/// Log standard deviations of the auxiliary heads are kept in this range, so a feature the
+/// data holds constant cannot drive the loss to −∞.
+const AUX_LOG_SIGMA: (f32, f32) = (-5.0, 3.0);
+
+/// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
+/// [`AUX_HORIZONS`] frames ahead.
 #[derive(Module, Debug)]
 pub struct Net {
     /// The causal transformer.
     pub transformer: Transformer,
     /// The flow over the next pose's normalised features.
     pub flow: Flow,
+    /// One head per [`AUX_HORIZONS`] entry: context → mean and log σ of that future pose.
+    /// Training-only: not stored in the model file (the live dancer samples the flow alone);
+    /// a resumed run starts them afresh.
+    pub aux: Vec<Dense>,
+}
+
+/// What one forward pass scores: the flow's NLL of the next pose per row `[b·s]`, and the
+/// auxiliary heads' Gaussian NLL per row, one tensor per horizon (empty without targets).
+pub struct Scores {
+    /// Next-pose NLL, nats per frame.
+    pub next: Tensor<1>,
+    /// Future-pose NLL per horizon, nats per frame.
+    pub aux: Vec<Tensor<1>>,
 }
 
 impl Net {
-    /// Builds the network from named tensors.
+    /// Builds the network from named tensors; the auxiliary heads start at zero (mean pose,
+    /// unit σ).
     pub fn load(t: &NamedTensors, c: &NetConfig, device: &Device) -> Result<Self, WeightError> {
         c.check()
             .map_err(|e| WeightError::Missing(format!("(bad config: {e})")))?;
+        let mut heads = NamedTensors::default();
+        for h in AUX_HORIZONS {
+            let name = format!("aux{h}");
+            heads.insert(
+                format!("{name}.w"),
+                &[c.d_model, 2 * MOTION_FEATURE_DIM],
+                vec![0.0; c.d_model * 2 * MOTION_FEATURE_DIM],
+            );
+            heads.insert(
+                format!("{name}.b"),
+                &[2 * MOTION_FEATURE_DIM],
+                vec![0.0; 2 * MOTION_FEATURE_DIM],
+            );
+        }
+        let aux = AUX_HORIZONS
+            .iter()
+            .map(|h| {
+                Dense::load(
+                    &heads,
+                    &format!("aux{h}"),
+                    c.d_model,
+                    2 * MOTION_FEATURE_DIM,
+                    device,
+                )
+            })
+            .collect::<Result<_, _>>()?;
         Ok(Net {
             transformer: Transformer::load(t, c, device)?,
             flow: Flow::load(t, "flow", &c.flow(), device)?,
+            aux,
         })
     }
 
-    /// Writes the trainable weights into `t` (normalisation and seed entries are left as they are).
+    /// Writes the trainable weights into `t` (normalisation and seed entries are left as they
+    /// are; the auxiliary heads are not written).
     pub fn store(&self, t: &mut NamedTensors) {
         self.transformer.store(t);
         self.flow.store(t, "flow");
     }
 
-    /// Negative log-likelihood of each target `[b, s, MOTION_FEATURE_DIM]` given its token
-    /// `[b, s, TOKEN_DIM]`, nats per frame, shape `[b·s]`.
-    pub fn nll(&self, tokens: Tensor<3>, targets: Tensor<3>) -> Tensor<1> {
+    /// Scores targets `[b, s, MOTION_FEATURE_DIM]` given tokens `[b, s, TOKEN_DIM]` and the
+    /// tokens' styles `[b·s, styles]`; `futures` (one `[b·s, MOTION_FEATURE_DIM]` per
+    /// [`AUX_HORIZONS`] entry) are scored by the auxiliary heads when given.
+    pub fn score(
+        &self,
+        tokens: Tensor<3>,
+        styles: Option<Tensor<2>>,
+        targets: Tensor<3>,
+        futures: Option<Vec<Tensor<2>>>,
+    ) -> Scores {
         let [b, s, _] = targets.dims();
-        let ctx = self.transformer.forward(tokens);
-        self.flow
+        let ctx = self.transformer.forward(tokens, styles);
+        let aux = match futures {
+            Some(f) => self
+                .aux
+                .iter()
+                .zip(f)
+                .map(|(head, y)| {
+                    let out = head.forward(ctx.clone());
+                    let mean = out.clone().narrow(1, 0, MOTION_FEATURE_DIM);
+                    let log_sigma = out
+                        .narrow(1, MOTION_FEATURE_DIM, MOTION_FEATURE_DIM)
+                        .clamp(AUX_LOG_SIGMA.0, AUX_LOG_SIGMA.1);
+                    let z = (y - mean) * log_sigma.clone().neg().exp();
+                    (z.powi_scalar(2).mul_scalar(0.5) + log_sigma)
+                        .sum_dim(1)
+                        .reshape([b * s])
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        let next = self
+            .flow
             .log_prob(targets.reshape([b * s, MOTION_FEATURE_DIM]), ctx)
-            .neg()
+            .neg();
+        Scores { next, aux }
     }
 
     /// Data-dependent initialisation of the flow's actnorms from one batch.
-    pub fn data_init(self, tokens: Tensor<3>, targets: Tensor<3>) -> Self {
+    pub fn data_init(
+        self,
+        tokens: Tensor<3>,
+        styles: Option<Tensor<2>>,
+        targets: Tensor<3>,
+    ) -> Self {
         let [b, s, _] = targets.dims();
-        let ctx = self.transformer.forward(tokens);
+        let ctx = self.transformer.forward(tokens, styles);
         let flow = self
             .flow
             .data_init(targets.reshape([b * s, MOTION_FEATURE_DIM]), ctx);
         Net {
             transformer: self.transformer,
             flow,
+            aux: self.aux,
         }
     }
 }
@@ -90,7 +178,14 @@ mod tests {
         }
         let tt =
             Tensor::<3>::from_data(TensorData::new(tokens.clone(), [1, s, TOKEN_DIM]), &device);
-        let batched = values(net.transformer.forward(tt));
+        // Conditioned on style 1 in both.
+        rt.set_style(Some(1));
+        let mut onehot = vec![0.0f32; s * c.styles];
+        for i in 0..s {
+            onehot[i * c.styles + 1] = 1.0;
+        }
+        let styles = Tensor::<2>::from_data(TensorData::new(onehot, [s, c.styles]), &device);
+        let batched = values(net.transformer.forward(tt, Some(styles)));
         let mut worst = 0f32;
         let mut last_ctx = Vec::new();
         for i in 0..s {

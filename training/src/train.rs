@@ -7,7 +7,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::device::{cpu_device, training_device};
 use crate::layers::values;
-use crate::net::Net;
+use crate::net::{AUX_HORIZONS, Net};
 use dsp::feature::FEATURE_DIM as M;
 use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
 use model::neural::config::NetConfig;
@@ -40,7 +40,16 @@ struct Dance {
     motion: Vec<f32>,
     music: Vec<f32>,
     frames: usize,
+    style: Option<usize>,
 }
+
+/// A dance to train on: its motion, its frame-aligned music and its style's index (see
+/// [`model::style::DanceStyle`]), if known.
+pub type DanceInput<'a> = (&'a [MotionFeatures], &'a [[f32; M]], Option<usize>);
+
+/// Weight of each auxiliary future-pose NLL in the training loss, against 1 for the next
+/// pose's.
+pub const AUX_WEIGHT: f32 = 0.3;
 
 /// Normalised dances to cut training sequences from.
 #[derive(Clone, Debug)]
@@ -52,6 +61,11 @@ pub struct Corpus {
     music_drop: f64,
 }
 
+/// Width of a batch's style rows (the network's style count; 0 = no style input).
+fn style_width(config: &NetConfig) -> usize {
+    config.styles
+}
+
 /// A batch of sequences: tokens `[b, window, TOKEN_DIM]` and targets `[b, window, P]`, flat.
 #[derive(Clone, Debug, Default)]
 pub struct Batch {
@@ -61,6 +75,11 @@ pub struct Batch {
     pub tokens: Vec<f32>,
     /// Next-pose targets (normalised), flat.
     pub targets: Vec<f32>,
+    /// Each token's style, one-hot (zeros: unknown) `[b, window, styles]`, flat.
+    pub styles: Vec<f32>,
+    /// The poses [`AUX_HORIZONS`] frames after each target (normalised, clean; the dance's
+    /// last frame where it ends sooner), one flat `[b, window, P]` per horizon.
+    pub futures: Vec<Vec<f32>>,
 }
 
 impl Corpus {
@@ -69,7 +88,7 @@ impl Corpus {
     /// the attention window train the sliding-window regime the live dancer runs in (every
     /// token past the first window sees a full window).
     pub fn new(
-        dances: &[(&[MotionFeatures], &[[f32; M]])],
+        dances: &[DanceInput],
         norm: &Normalizer,
         config: &NetConfig,
         sequence: usize,
@@ -78,8 +97,8 @@ impl Corpus {
         let need = sequence + config.lookahead + 1;
         let dances = dances
             .iter()
-            .filter(|(m, a)| m.len().min(a.len()) >= need)
-            .map(|(m, a)| {
+            .filter(|(m, a, _)| m.len().min(a.len()) >= need)
+            .map(|(m, a, style)| {
                 let frames = m.len().min(a.len());
                 let mut motion = vec![0.0; frames * P];
                 let mut music = vec![0.0; frames * M];
@@ -91,6 +110,7 @@ impl Corpus {
                     motion,
                     music,
                     frames,
+                    style: style.filter(|&s| s < style_width(config)),
                 }
             })
             .collect();
@@ -142,6 +162,8 @@ impl Corpus {
         let d = &self.dances[dance];
         let (s, l) = (self.sequence, self.config.lookahead);
         let mut tok = vec![0.0; TOKEN_DIM];
+        let width = style_width(&self.config);
+        batch.futures.resize(AUX_HORIZONS.len(), Vec::new());
         for t in 0..s {
             let f = start + t;
             let pose = &d.motion[(f - 1) * P..f * P];
@@ -173,6 +195,15 @@ impl Corpus {
                 for v in &mut batch.targets[n - P..] {
                     *v += TARGET_NOISE * rng.normal();
                 }
+            }
+            let n = batch.styles.len();
+            batch.styles.resize(n + width, 0.0);
+            if let Some(style) = d.style {
+                batch.styles[n + style] = 1.0;
+            }
+            for (h, future) in AUX_HORIZONS.iter().zip(batch.futures.iter_mut()) {
+                let g = (f + h).min(d.frames - 1);
+                future.extend_from_slice(&d.motion[g * P..(g + 1) * P]);
             }
         }
         batch.sequences += 1;
@@ -279,18 +310,36 @@ impl Corpus {
     }
 }
 
-fn tensors(b: &Batch, device: &Device) -> (Tensor<3>, Tensor<3>) {
+/// A batch as tensors: tokens, styles (None for a network without a style input), targets and
+/// the auxiliary futures.
+struct BatchTensors {
+    tokens: Tensor<3>,
+    styles: Option<Tensor<2>>,
+    targets: Tensor<3>,
+    futures: Vec<Tensor<2>>,
+}
+
+fn tensors(b: &Batch, device: &Device) -> BatchTensors {
     let s = b.tokens.len() / (b.sequences.max(1) * TOKEN_DIM);
-    (
-        Tensor::from_data(
+    let rows = b.sequences * s;
+    let width = b.styles.len() / rows.max(1);
+    BatchTensors {
+        tokens: Tensor::from_data(
             TensorData::new(b.tokens.clone(), [b.sequences, s, TOKEN_DIM]),
             device,
         ),
-        Tensor::from_data(
+        styles: (width > 0)
+            .then(|| Tensor::from_data(TensorData::new(b.styles.clone(), [rows, width]), device)),
+        targets: Tensor::from_data(
             TensorData::new(b.targets.clone(), [b.sequences, s, P]),
             device,
         ),
-    )
+        futures: b
+            .futures
+            .iter()
+            .map(|f| Tensor::from_data(TensorData::new(f.clone(), [rows, P]), device))
+            .collect(),
+    }
 }
 
 /// The network under training with its optimiser.
@@ -319,19 +368,33 @@ impl Trainer {
 
     /// Data-dependent initialisation of the flow's actnorms (fresh models only, before the first step).
     pub fn data_init(&mut self, batch: &Batch) {
-        let (tok, tgt) = tensors(batch, &self.device);
-        self.net = self.net.take().map(|n| n.data_init(tok, tgt));
+        let t = tensors(batch, &self.device);
+        self.net = self
+            .net
+            .take()
+            .map(|n| n.data_init(t.tokens, t.styles, t.targets));
     }
 
-    /// One optimiser step at learning rate `lr`; returns the batch's NLL, nats per frame (a
-    /// non-finite NLL skips the update).
-    pub fn step(&mut self, batch: &Batch, lr: f64) -> f32 {
+    /// One optimiser step at learning rate `lr` on the next pose's NLL plus [`AUX_WEIGHT`]
+    /// times each future pose's (with `aux`); returns the batch's next-pose NLL, nats per
+    /// frame (a non-finite loss skips the update).
+    pub fn step(&mut self, batch: &Batch, lr: f64, aux: bool) -> f32 {
         let Some(net) = self.net.take() else {
             return f32::NAN;
         };
-        let (tok, tgt) = tensors(batch, &self.device);
-        let loss = net.nll(tok, tgt).mean();
-        let value = values(loss.clone()).first().copied().unwrap_or(f32::NAN);
+        let t = tensors(batch, &self.device);
+        let scores = net.score(t.tokens, t.styles, t.targets, aux.then_some(t.futures));
+        let next = scores.next.mean();
+        let value = values(next.clone()).first().copied().unwrap_or(f32::NAN);
+        let loss = scores
+            .aux
+            .into_iter()
+            .fold(next, |l, a| l + a.mean().mul_scalar(AUX_WEIGHT));
+        let value = if values(loss.clone()).first().is_some_and(|v| v.is_finite()) {
+            value
+        } else {
+            f32::NAN
+        };
         if !value.is_finite() {
             // Skip the update: one bad batch must not poison the weights.
             self.net = Some(net);
@@ -357,8 +420,8 @@ impl Trainer {
         let net = Net::load(&self.model().tensors, &config, &device)?;
         let (mut sum, mut n) = (0.0f64, 0usize);
         for b in batches {
-            let (tok, tgt) = tensors(b, &device);
-            let v = values(net.nll(tok, tgt));
+            let t = tensors(b, &device);
+            let v = values(net.score(t.tokens, t.styles, t.targets, None).next);
             sum += v.iter().map(|&x| x as f64).sum::<f64>();
             n += v.len();
         }
@@ -388,7 +451,12 @@ mod tests {
             music[i][1] = ph.cos();
         }
         let norm = Normalizer::fit(&motion, &music);
-        let corpus = Corpus::new(&[(&motion[..], &music[..])], &norm, &c, 2 * c.window);
+        let corpus = Corpus::new(
+            &[(&motion[..], &music[..], Some(1))],
+            &norm,
+            &c,
+            2 * c.window,
+        );
         let mut model = NeuralModel {
             config: c,
             tensors: init_net(&c, 1),
@@ -402,7 +470,7 @@ mod tests {
         let before = tr.evaluate(&val).unwrap();
         for _ in 0..30 {
             let b = corpus.random_batch(&mut rng, 8, 0.5);
-            assert!(tr.step(&b, 3e-3).is_finite());
+            assert!(tr.step(&b, 3e-3, true).is_finite());
         }
         let after = tr.evaluate(&val).unwrap();
         assert!(after < before - 20.0, "NLL {before} → {after}");
@@ -422,7 +490,7 @@ mod tests {
             }
         }
         let norm = Normalizer::fit(&motion, &music);
-        let corpus = Corpus::new(&[(&motion[..], &music[..])], &norm, &c, 16);
+        let corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 16);
         let (dance, start) = corpus.typical_seed().unwrap();
         assert_eq!(dance, 0);
         assert!(start >= 20, "seed starts at {start}");

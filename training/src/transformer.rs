@@ -5,9 +5,9 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData, activation};
 
-use crate::layers::{Dense, LayerNorm, param1, store};
+use crate::layers::{Dense, LayerNorm, param1, param2, store};
 use model::neural::config::{NetConfig, rope_frequency};
-use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
 use model::neural::token::FLAG_AT;
 
 /// One pre-norm block: windowed causal self-attention, then a ReLU feed-forward.
@@ -26,6 +26,8 @@ pub struct Block {
 pub struct Transformer {
     embed: Dense,
     none: Param<Tensor<1>>,
+    /// `[styles, d]`; None for a network without a style input.
+    style: Option<Param<Tensor<2>>>,
     blocks: Vec<Block>,
     final_ln: LayerNorm,
     #[module(skip)]
@@ -104,6 +106,11 @@ impl Transformer {
         Ok(Transformer {
             embed: Dense::load(t, "embed", c.token_dim(), d, device)?,
             none: param1(t, "embed.none", d, device)?,
+            style: if c.styles > 0 {
+                Some(param2(t, STYLE_EMBEDDING, c.styles, d, device)?)
+            } else {
+                None
+            },
             blocks,
             final_ln: LayerNorm::load(t, "final_ln", d, device)?,
             config: *c,
@@ -114,6 +121,9 @@ impl Transformer {
     pub fn store(&self, t: &mut NamedTensors) {
         self.embed.store(t, "embed");
         store(t, "embed.none", &self.none);
+        if let Some(style) = &self.style {
+            store(t, STYLE_EMBEDDING, style);
+        }
         for (l, b) in self.blocks.iter().enumerate() {
             let p = format!("layer{l}");
             b.ln1.store(t, &format!("{p}.ln1"));
@@ -127,14 +137,18 @@ impl Transformer {
     }
 
     /// Context vectors `[b·s, d_model]` for tokens `[b, s, TOKEN_DIM]`; row b·s + t sees
-    /// tokens t − window + 1 ..= t of its sequence.
-    pub fn forward(&self, tokens: Tensor<3>) -> Tensor<2> {
+    /// tokens t − window + 1 ..= t of its sequence. `styles` is one row per token `[b·s,
+    /// styles]` (one-hot, or zeros: unconditioned), ignored by a network without a style input.
+    pub fn forward(&self, tokens: Tensor<3>, styles: Option<Tensor<2>>) -> Tensor<2> {
         let [b, s, i] = tokens.dims();
         let device = tokens.device();
         let c = &self.config;
         let x2 = tokens.reshape([b * s, i]);
         let no_key = x2.clone().narrow(1, FLAG_AT, 1).neg().add_scalar(1.0);
         let mut x = self.embed.forward(x2) + no_key * self.none.val().unsqueeze::<2>();
+        if let (Some(table), Some(onehot)) = (&self.style, styles) {
+            x = x + onehot.matmul(table.val());
+        }
         let half = c.head_dim() / 2;
         let mut cos = vec![0.0f32; s * half];
         let mut sin = vec![0.0f32; s * half];

@@ -103,10 +103,27 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     }
     print!("{}", crate::eval::table(&rows));
     // Which style each 10 s window looks like, by a nearest-centroid judge fit on the
-    // training dances (no dancer takes a style input yet: the rows are the song's style).
+    // training dances: with the style chosen from the music (auto), rows are the song's style.
     for (label, motions) in &styled {
         if let Some(c) = set.style_confusion(motions) {
             print!("\n{}", crate::eval::style_table(label, &c));
+        }
+    }
+    // With each style requested in turn on every song (models with a style input).
+    let probe = crate::dancer::neural_dancer(&model, o.seed)?;
+    if probe.has_style_input() {
+        let mut alone = crate::dancer::neural_dancer(&model, o.seed)?;
+        alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
+        for (label, mut dancer) in [
+            ("neural T=0.5", probe),
+            ("neural, network only T=0.5", alone),
+        ] {
+            if let Some(c) = set.requested_style_confusion(&mut dancer, 0.5, o.seed) {
+                print!(
+                    "\n{}",
+                    crate::eval::style_table_of(label, "style requested", &c)
+                );
+            }
         }
     }
     if o.quick {

@@ -108,6 +108,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     let lead_frames = (keypose_lead.max(0.0) * fps).round() as usize;
     let mut config = Config::default();
     source_args.apply(&mut config);
+    let style = config.dancer.style_request();
     let kind = if data.is_some() {
         SourceKind::Retrieval
     } else {
@@ -184,6 +185,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             temperature,
             key_pose: crate::key_cue::target_at(&cues, i, lead_frames),
             beat_accent: None,
+            style,
         },
     );
     let step_s = step_start.elapsed().as_secs_f64();

@@ -20,6 +20,15 @@ pub struct SourceArgs {
     /// Depth of the neural dancer's beat accent, 0–0.9 (0: the network's own timing).
     #[arg(long)]
     pub beat_accent: Option<f32>,
+    /// Dance style: auto (from the music's meter and tempo), cha-cha, rumba, tango or waltz.
+    #[arg(long, value_parser = parse_style)]
+    pub style: Option<String>,
+}
+
+fn parse_style(s: &str) -> Result<String, String> {
+    model::style::StyleRequest::parse(s)
+        .map(|r| r.name().to_string())
+        .ok_or_else(|| format!("{s:?}: expected auto, cha-cha, rumba, tango or waltz"))
 }
 
 impl SourceArgs {
@@ -49,6 +58,9 @@ impl SourceArgs {
         }
         if let Some(a) = self.beat_accent {
             config.dancer.beat_accent = a;
+        }
+        if let Some(s) = &self.style {
+            config.dancer.style = s.clone();
         }
     }
 }

@@ -2,6 +2,7 @@
 //! Unknown keys are errors (a typo must not silently fall back to a default), and every error
 //! names the file and the key.
 
+use model::style::StyleRequest;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -249,6 +250,9 @@ pub struct DancerConfig {
     pub transition_beats: f32,
     /// Depth of the neural dancer's beat accent (0: the network's own timing).
     pub beat_accent: f32,
+    /// Dance style: `auto` (from the music's meter and tempo), `cha-cha`, `rumba`, `tango` or
+    /// `waltz` (models trained before issue 21 have no style input and ignore it).
+    pub style: String,
 }
 
 impl Default for DancerConfig {
@@ -261,7 +265,16 @@ impl Default for DancerConfig {
             seed: 1,
             transition_beats: 1.0,
             beat_accent: model::neural::dancer::BEAT_ACCENT,
+            style: "auto".into(),
         }
+    }
+}
+
+impl DancerConfig {
+    /// The style asked for (a validated configuration always names one; anything else reads
+    /// as auto).
+    pub fn style_request(&self) -> StyleRequest {
+        StyleRequest::parse(&self.style).unwrap_or_default()
     }
 }
 
@@ -353,6 +366,15 @@ impl Config {
                 format!("= {a}: must be in {lo}..={hi}"),
             ));
         }
+        if model::style::StyleRequest::parse(&self.dancer.style).is_none() {
+            return Err(bad(
+                "dancer.style",
+                format!(
+                    "= {:?}: must be auto, cha-cha, rumba, tango or waltz",
+                    self.dancer.style
+                ),
+            ));
+        }
         if let Some(list) = &self.audio.channels {
             let max = super::input_mix::MAX_INPUT_CHANNELS;
             let mut seen = std::collections::BTreeSet::new();
@@ -419,6 +441,7 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use model::style::DanceStyle;
 
     #[test]
     fn shipped_config_parses_to_the_defaults() {
@@ -472,6 +495,18 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("dancer.model"), "{e}");
+    }
+
+    #[test]
+    fn style_is_checked() {
+        let c = Config::parse("[dancer]\nstyle = \"Rumba\"\n", Path::new("x.toml")).unwrap();
+        assert_eq!(
+            c.dancer.style_request(),
+            StyleRequest::Style(DanceStyle::Rumba)
+        );
+        assert_eq!(Config::default().dancer.style_request(), StyleRequest::Auto);
+        let e = Config::parse("[dancer]\nstyle = \"polka\"\n", Path::new("x.toml")).unwrap_err();
+        assert!(e.to_string().contains("dancer.style"), "{e}");
     }
 
     #[test]

@@ -23,6 +23,7 @@ use protocols::control::{
 use super::sink::PoseBank;
 use super::stats::Stats;
 use super::wire::{ControlEvent, Quantize};
+use model::style::{DanceStyle, StyleRequest};
 
 /// Events one input may queue before the motion thread takes them.
 const QUEUE_CAPACITY: usize = 256;
@@ -44,6 +45,8 @@ pub enum MotionCommand {
     TempoHint(f32),
     /// New style seed: the dance goes on, its randomness restarts.
     StyleSeed(u64),
+    /// New dance style (or auto).
+    DanceStyle(StyleRequest),
     /// Reach the key pose at this index of the pose table.
     KeyPose {
         /// Index in [`ControlHub::table`]'s order.
@@ -88,6 +91,24 @@ struct Params {
     transition: ParamSlot,
     tempo_hint: ParamSlot,
     seed: ParamSlot,
+    /// 0 = auto, 1 + index = that [`DanceStyle`].
+    style: ParamSlot,
+}
+
+fn style_bits(request: StyleRequest) -> u64 {
+    match request {
+        StyleRequest::Auto => 0,
+        StyleRequest::Style(s) => 1 + s.index() as u64,
+    }
+}
+
+fn style_of_bits(bits: u64) -> StyleRequest {
+    match bits.checked_sub(1) {
+        Some(i) => {
+            DanceStyle::from_index(i as usize).map_or(StyleRequest::Auto, StyleRequest::Style)
+        }
+        None => StyleRequest::Auto,
+    }
 }
 
 /// Builds the control path before a run: hands out one sender per input, then becomes the
@@ -276,6 +297,11 @@ impl ControlSender {
                 self.offer(&p.seed, seed);
                 return Ok(());
             }
+            ControlEvent::DanceStyle(name) => {
+                let request = StyleRequest::parse(&name).ok_or(ControlRefusal::OutOfRange)?;
+                self.offer(&p.style, style_bits(request));
+                return Ok(());
+            }
             ControlEvent::KeyPose { name, quantize } => {
                 let Some(&pose) = self.names.get(&name) else {
                     return Err(ControlRefusal::UnknownPose(name));
@@ -321,6 +347,9 @@ impl ControlReceiver {
         }
         if let Some(seed) = p.seed.take() {
             apply(MotionCommand::StyleSeed(seed));
+        }
+        if let Some(bits) = p.style.take() {
+            apply(MotionCommand::DanceStyle(style_of_bits(bits)));
         }
         for c in &mut self.consumers {
             while let Ok(command) = c.pop() {
@@ -426,6 +455,7 @@ mod tests {
             ControlEvent::TransitionBeats(0.0),
             ControlEvent::TransitionBeats(65.0),
             ControlEvent::TempoHint(20.0),
+            ControlEvent::DanceStyle("polka".into()),
         ] {
             assert_eq!(
                 tx.send(bad.clone()),
@@ -433,7 +463,32 @@ mod tests {
                 "{bad:?}"
             );
         }
-        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 6);
+        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 7);
+    }
+
+    #[test]
+    fn a_style_by_name_reaches_the_motion_thread_newest_first() {
+        let (mut hub, stats) = hub();
+        let mut tx = hub.sender();
+        let (mut rx, _) = hub.into_receiver();
+        tx.send(ControlEvent::DanceStyle("rumba".into())).unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![MotionCommand::DanceStyle(StyleRequest::Style(
+                DanceStyle::Rumba
+            ))]
+        );
+        tx.send(ControlEvent::DanceStyle("waltz".into())).unwrap();
+        tx.send(ControlEvent::DanceStyle("auto".into())).unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![MotionCommand::DanceStyle(StyleRequest::Auto)]
+        );
+        assert_eq!(stats.controls_coalesced.load(Ordering::Relaxed), 1);
+        for s in DanceStyle::ALL {
+            let r = StyleRequest::Style(s);
+            assert_eq!(style_of_bits(style_bits(r)), r);
+        }
     }
 
     #[test]

@@ -69,6 +69,8 @@ pub struct MotionSettings {
     pub transition_beats: f32,
     /// Initial beat accent (None: the source's own).
     pub beat_accent: Option<f32>,
+    /// Initial dance style.
+    pub style: model::style::StyleRequest,
     /// Model frames past the newest analysed frame each pose is made for (at least the
     /// source's look-ahead; see `crate::horizon`).
     pub horizon_frames: usize,
@@ -121,6 +123,7 @@ pub fn run(
             temperature: settings.temperature,
             key_pose: None,
             beat_accent: settings.beat_accent,
+            style: settings.style,
         },
         transition_beats: settings.transition_beats,
         tempo_hint: 0.0,
@@ -140,6 +143,10 @@ pub fn run(
             .beat_accent
             .set(st.controls.beat_accent.unwrap_or(f32::NAN));
         stats.paused.store(u32::from(st.paused), Ordering::Relaxed);
+        stats.set_style_danced(
+            source.style(),
+            st.controls.style == model::style::StyleRequest::Auto,
+        );
         let msg = match queues.features.pop() {
             Ok(m) => m,
             Err(_) if queues.features.is_abandoned() => break,
@@ -243,6 +250,7 @@ fn apply(
         MotionCommand::ClearKeyPose => st.key = None,
         MotionCommand::TransitionBeats(b) => st.transition_beats = b,
         MotionCommand::StyleSeed(seed) => source.reseed(seed),
+        MotionCommand::DanceStyle(style) => st.controls.style = style,
         MotionCommand::Pause => st.paused = true,
         MotionCommand::Resume => st.paused = false,
         MotionCommand::TempoHint(bpm) => st.tempo_hint = bpm,

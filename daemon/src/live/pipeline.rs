@@ -49,6 +49,8 @@ pub struct PipelineSettings {
     pub transition_beats: f32,
     /// Initial beat accent (None: the source's own).
     pub beat_accent: Option<f32>,
+    /// Initial dance style (auto by default).
+    pub style: model::style::StyleRequest,
     /// Wall time without audio after which silence is analysed instead, seconds.
     pub silence_after_s: f64,
     /// Run the threads at real-time priority where the system allows it.
@@ -67,6 +69,7 @@ impl Default for PipelineSettings {
             temperature: 0.5,
             transition_beats: 1.0,
             beat_accent: None,
+            style: model::style::StyleRequest::Auto,
             silence_after_s: 0.25,
             realtime: true,
         }
@@ -186,6 +189,7 @@ impl Pipeline {
                 temperature: settings.temperature,
                 transition_beats: settings.transition_beats,
                 beat_accent: settings.beat_accent,
+                style: settings.style,
                 horizon_frames: horizon,
             };
             let (receiver, table) = controls.into_receiver();

@@ -233,6 +233,10 @@ pub struct Stats {
     pub key_pose_index: AtomicU32,
     /// 1 while paused.
     pub paused: AtomicU32,
+    /// The style danced: 0 = none (a source without a style input), 1 + its index.
+    pub style: AtomicU32,
+    /// 1 while the style is `auto` (chosen from the music), 0 while one is requested.
+    pub style_auto: AtomicU32,
     /// What the dancer's safety nets did (neural dancer only).
     pub safety: SafetyGauges,
     rss: Mutex<Vec<(f64, u64)>>,
@@ -289,6 +293,8 @@ impl Stats {
             key_pose_index: AtomicU32::new(0),
             safety: SafetyGauges::default(),
             paused: AtomicU32::new(0),
+            style: AtomicU32::new(0),
+            style_auto: AtomicU32::new(1),
             // One sample a second: two hours before this ever grows.
             rss: Mutex::new(Vec::with_capacity(7200)),
         }
@@ -311,6 +317,21 @@ impl Stats {
         {
             v.push((elapsed_s, rss));
         }
+    }
+
+    /// Records the style danced (None: the source has no style input) and whether the music
+    /// chose it (`auto`).
+    pub fn set_style_danced(&self, style: Option<model::style::DanceStyle>, auto: bool) {
+        let v = style.map_or(0, |s| 1 + s.index() as u32);
+        self.style.store(v, Ordering::Relaxed);
+        self.style_auto.store(u32::from(auto), Ordering::Relaxed);
+    }
+
+    /// The style danced, as last recorded.
+    pub fn style_danced(&self) -> Option<model::style::DanceStyle> {
+        let v = self.style.load(Ordering::Relaxed);
+        v.checked_sub(1)
+            .and_then(|i| model::style::DanceStyle::from_index(i as usize))
     }
 
     /// The summary of a run lasting `wall_s` that used `cpu_s` of process CPU time.
@@ -387,6 +408,7 @@ impl Stats {
             midi_skipped: 0,
             midi_queue_full: 0,
             safety_nets: self.safety.load(),
+            style: self.style_danced().map(|s| s.name()),
             view: None,
         }
     }
@@ -559,6 +581,9 @@ pub struct StatsReport {
     /// What the dancer's safety nets did (neural dancer only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety_nets: Option<SafetyCounts>,
+    /// The style danced at the end (sources with a style input only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub style: Option<&'static str>,
     /// The browser view's counters, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub view: Option<crate::view::ViewReport>,

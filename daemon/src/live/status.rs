@@ -26,8 +26,13 @@ pub fn status_line(stats: &Stats) -> String {
     } else {
         ""
     };
+    let style = match stats.style_danced() {
+        Some(s) if stats.style_auto.load(Ordering::Relaxed) == 1 => format!("{} (auto)", s.name()),
+        Some(s) => s.name().to_string(),
+        None => "–".to_string(),
+    };
     format!(
-        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | key pose {key} | drops {} | packets {}{paused}",
+        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | style {style} | key pose {key} | drops {} | packets {}{paused}",
         stats.tempo_bpm.get(),
         stats.beat_phase.get(),
         stats.latency.quantile_ms(0.99),

@@ -39,6 +39,10 @@ pub struct ViewStatus {
     pub temperature: f32,
     /// Beat accent now (None: the dancer's own).
     pub accent: Option<f32>,
+    /// The style danced (None: a dancer without a style input).
+    pub style: Option<&'static str>,
+    /// Whether the music chose the style (`auto`) rather than the performer.
+    pub style_auto: bool,
     /// `"none"`, `"pending"` or `"reached"`.
     pub key_pose: &'static str,
     /// The pending (or last reached) key pose's name.
@@ -70,6 +74,8 @@ impl ViewStatus {
             beat_phase: stats.beat_phase.get(),
             temperature: stats.temperature.get(),
             accent: accent.is_finite().then_some(accent),
+            style: stats.style_danced().map(|s| s.name()),
+            style_auto: stats.style_auto.load(Ordering::Relaxed) == 1,
             key_pose: match key {
                 KEY_POSE_PENDING => "pending",
                 KEY_POSE_REACHED => "reached",

@@ -65,11 +65,16 @@ pub struct NetConfig {
     pub flow_steps: usize,
     /// Hidden width of the flow's coupling MLPs.
     pub flow_hidden: usize,
+    /// Dance styles the network is conditioned on (a learned vector per style added to every
+    /// token's embedding, `embed.style`); 0 = no style input (models before issue 21).
+    #[serde(default)]
+    pub styles: usize,
 }
 
 impl Default for NetConfig {
     /// The shipped size: 3 × 128-wide blocks over a 2.56 s window, no look-ahead (the music
-    /// is predicted to each frame's time instead, see `dsp::predicted_stream`), 8 flow steps.
+    /// is predicted to each frame's time instead, see `dsp::predicted_stream`), 8 flow steps,
+    /// conditioned on the four styles.
     fn default() -> Self {
         NetConfig {
             d_model: 128,
@@ -80,6 +85,7 @@ impl Default for NetConfig {
             lookahead: 0,
             flow_steps: 8,
             flow_hidden: 192,
+            styles: crate::style::DanceStyle::COUNT,
         }
     }
 }
@@ -96,6 +102,7 @@ impl NetConfig {
             lookahead: 2,
             flow_steps: 2,
             flow_hidden: 16,
+            styles: crate::style::DanceStyle::COUNT,
         }
     }
 
@@ -133,7 +140,12 @@ impl NetConfig {
         if self.flow_steps == 0 || self.flow_hidden == 0 || self.ff == 0 {
             return Err("zero-sized flow or feed-forward".into());
         }
-        if self.window > 4096 || self.d_model > 4096 || self.ff > 16384 || self.lookahead > 250 {
+        if self.window > 4096
+            || self.d_model > 4096
+            || self.ff > 16384
+            || self.lookahead > 250
+            || self.styles > 64
+        {
             return Err("implausibly large network".into());
         }
         Ok(())

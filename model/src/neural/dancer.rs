@@ -23,6 +23,7 @@ use crate::neural::safety::{SafetyCounts, SafetyNets};
 use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 use crate::rig::{Pose, Skeleton};
 use crate::source::{Controls, MotionSource, finite_clamp};
+use crate::style::{DanceStyle, StyleFromMusic, StyleRequest};
 
 /// A normalised output beyond this many standard deviations counts as exploding.
 pub const EXPLODED_SIGMAS: f32 = 50.0;
@@ -104,8 +105,13 @@ pub struct NeuralDancer {
     glide_left: u32,
     foot_lock: FootLock,
     previous_raw: [f32; MOTION_FEATURE_DIM],
+    /// The range clamp's bounds in raw units (`low`, `high` are normalised).
+    low_raw: [f32; MOTION_FEATURE_DIM],
+    high_raw: [f32; MOTION_FEATURE_DIM],
     mean_speed_mps: f32,
     horizon_frames: usize,
+    style_from_music: StyleFromMusic,
+    style: DanceStyle,
 }
 
 impl NeuralDancer {
@@ -138,6 +144,11 @@ impl NeuralDancer {
         }
         norm.pose(&l, &mut low);
         norm.pose(&h, &mut high);
+        let (mut low_raw, mut high_raw) = ([0.0; MOTION_FEATURE_DIM], [0.0; MOTION_FEATURE_DIM]);
+        for i in 0..MOTION_FEATURE_DIM {
+            low_raw[i] = l[i].min(h[i]);
+            high_raw[i] = l[i].max(h[i]);
+        }
         let varying = (0..MOTION_FEATURE_DIM)
             .map(|i| hi[i] - lo[i] > CONSTANT_FEATURE_RANGE)
             .collect();
@@ -147,6 +158,8 @@ impl NeuralDancer {
             norm,
             low,
             high,
+            low_raw,
+            high_raw,
             varying,
             previous: vec![0.0; MOTION_FEATURE_DIM],
             seed_motion,
@@ -177,6 +190,8 @@ impl NeuralDancer {
             ),
             previous_raw: [0.0; MOTION_FEATURE_DIM],
             mean_speed_mps: 0.0,
+            style_from_music: StyleFromMusic::new(),
+            style: DanceStyle::Waltz,
         };
         d.reset(0);
         Ok(d)
@@ -275,6 +290,17 @@ impl NeuralDancer {
         self.mean_speed_mps += alpha * (step * fps - self.mean_speed_mps);
     }
 
+    /// The style danced at the last frame (requested, or chosen from the music for `auto`;
+    /// a model without a style input dances it only as far as its music suggests it).
+    pub fn style(&self) -> DanceStyle {
+        self.style
+    }
+
+    /// Whether the model takes a style input (models before issue 21 do not).
+    pub fn has_style_input(&self) -> bool {
+        self.runtime.config().styles > 0
+    }
+
     /// The last flow sample, normalised features (for diagnostics: a held frame's culprit).
     pub fn last_sample(&self) -> &[f32] {
         &self.sample
@@ -305,6 +331,15 @@ impl MotionSource for NeuralDancer {
                 *v = 0.0;
             }
         }
+        let heard = match music.get(self.lookahead_frames()).or(music.last()) {
+            Some(frame) => self.style_from_music.push(frame),
+            None => self.style_from_music.style(),
+        };
+        self.style = match controls.style {
+            StyleRequest::Auto => heard,
+            StyleRequest::Style(s) => s,
+        };
+        self.runtime.set_style(Some(self.style.index()));
         let key = controls.key_pose.map(|k| {
             token::key_rotations(&k.rotations, &mut self.key_raw);
             self.norm.key(&self.key_raw, &mut self.key);
@@ -355,6 +390,17 @@ impl MotionSource for NeuralDancer {
             };
             self.counts.accented += u64::from(accent > 0.0);
             self.shape_motion(beat_cos, accent);
+            if self.nets.range_clamp {
+                // The accent's pace extrapolates the step (pace > 1) or starts it from a pose
+                // outside the range (the seed's, a key pose's): the pose shown stays in range.
+                // Displacements are left to the speed limit, which may take them below it.
+                let bounds = self.low_raw.iter().zip(&self.high_raw);
+                for (i, (f, (lo, hi))) in self.features.iter_mut().zip(bounds).enumerate() {
+                    if !matches!(i, ROOT_DX | ROOT_DZ | ROOT_DFACING) {
+                        *f = f.clamp(*lo, *hi);
+                    }
+                }
+            }
             let blend = self.nets.key_blend.then_some(self.key_blend_frames);
             if let Some((ftg, frames)) = key.zip(blend).filter(|&(f, n)| f < n) {
                 self.counts.key_blended += 1;
@@ -406,6 +452,11 @@ impl MotionSource for NeuralDancer {
     }
 
     fn reset(&mut self, seed: u64) {
+        // The seed clip is pushed with the style `auto` starts from, whatever the last run
+        // danced, so a reset starts the same dance every time.
+        self.style_from_music.reset();
+        self.style = self.style_from_music.style();
+        self.runtime.set_style(Some(self.style.index()));
         self.prime();
         self.rng = Rng::new(seed);
         for n in self.noise.iter_mut() {
@@ -424,6 +475,10 @@ impl MotionSource for NeuralDancer {
 
     fn safety_counts(&self) -> Option<SafetyCounts> {
         Some(self.counts)
+    }
+
+    fn style(&self) -> Option<DanceStyle> {
+        self.has_style_input().then_some(self.style)
     }
 
     fn reseed(&mut self, seed: u64) {
@@ -495,6 +550,57 @@ mod tests {
         assert_eq!(a, b);
         assert!(a.iter().all(|p| p.is_finite()));
         assert_eq!(d.lookahead_frames(), 2);
+    }
+
+    /// Poses of 30 frames at T = 0 with `style` requested.
+    fn styled_run(d: &mut NeuralDancer, style: StyleRequest) -> Vec<Pose> {
+        let music = vec![[0.1f32; FEATURE_DIM]; 3];
+        let controls = Controls {
+            style,
+            ..Controls::default()
+        };
+        d.reset(5);
+        let mut pose = Pose::rest();
+        (0..30)
+            .map(|_| {
+                d.step(&music, &controls, &mut pose);
+                pose
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_requested_style_changes_the_dance_and_a_model_without_styles_ignores_it() {
+        let mut d = dancer(0.05);
+        assert!(d.has_style_input());
+        let runs: Vec<Vec<Pose>> = DanceStyle::ALL
+            .iter()
+            .map(|s| styled_run(&mut d, StyleRequest::Style(*s)))
+            .collect();
+        for (i, a) in runs.iter().enumerate() {
+            assert!(a.iter().all(|p| p.is_finite()));
+            for b in &runs[i + 1..] {
+                assert_ne!(a, b, "two styles danced alike");
+            }
+        }
+        assert_eq!(d.style(), DanceStyle::Waltz);
+        // Auto on music without beats keeps its starting choice (waltz): the same dance.
+        assert_eq!(styled_run(&mut d, StyleRequest::Auto), runs[3]);
+        // A model from before styles: the request changes nothing.
+        let mut c = NetConfig::tiny();
+        c.styles = 0;
+        let mut tensors = init_net(&c, 1);
+        tensors.perturb(2, 0.05);
+        let mut old = NeuralDancer::new(&NeuralModel {
+            config: c,
+            tensors,
+            training: TrainingSummary::default(),
+        })
+        .unwrap();
+        assert!(!old.has_style_input());
+        let a = styled_run(&mut old, StyleRequest::Style(DanceStyle::ChaCha));
+        let b = styled_run(&mut old, StyleRequest::Style(DanceStyle::Rumba));
+        assert_eq!(a, b);
     }
 
     /// Horizontal distance the hips cover in the first frame after a reset with `accent`, on

@@ -6,7 +6,7 @@
 
 use crate::neural::config::{COUPLING_SCALE_OFFSET, LN_EPS, NetConfig, rope_frequency};
 use crate::neural::lu;
-use crate::neural::tensors::{NamedTensors, WeightError};
+use crate::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
 use crate::neural::token::FLAG_AT;
 
 struct Dense {
@@ -87,6 +87,10 @@ pub struct Runtime {
     config: NetConfig,
     embed: Dense,
     none: Vec<f32>,
+    /// `[styles, d]`, empty for a model without a style input.
+    style_table: Vec<f32>,
+    /// Row of `style_table` added to every token, if any.
+    style: Option<usize>,
     blocks: Vec<Block>,
     final_ln: Norm,
     steps: Vec<FlowStep>,
@@ -166,6 +170,12 @@ impl Runtime {
             config: *c,
             embed: Dense::load(t, "embed", c.token_dim(), d)?,
             none: t.get("embed.none", &[d])?.to_vec(),
+            style_table: if c.styles > 0 {
+                t.get(STYLE_EMBEDDING, &[c.styles, d])?.to_vec()
+            } else {
+                Vec::new()
+            },
+            style: None,
             blocks,
             final_ln: Norm::load(t, "final_ln", d)?,
             steps,
@@ -194,6 +204,12 @@ impl Runtime {
         &self.config
     }
 
+    /// Conditions every token pushed from now on on style `index` (None, or a model without a
+    /// style input: unconditioned); an index past the model's styles is ignored.
+    pub fn set_style(&mut self, index: Option<usize>) {
+        self.style = index.filter(|&i| i < self.config.styles);
+    }
+
     /// Forgets every cached token.
     pub fn reset(&mut self) {
         self.filled = 0;
@@ -210,6 +226,11 @@ impl Runtime {
         let no_key = 1.0 - token[FLAG_AT];
         for (x, n) in self.x.iter_mut().zip(&self.none) {
             *x += no_key * n;
+        }
+        if let Some(i) = self.style {
+            for (x, s) in self.x.iter_mut().zip(&self.style_table[i * d..(i + 1) * d]) {
+                *x += s;
+            }
         }
         for k in 0..half {
             let (s, co) = (self.position as f64 * rope_frequency(k, half)).sin_cos();

@@ -16,6 +16,8 @@ pub const POSE_MAX: &str = "range.pose_max";
 pub const SEED_MOTION: &str = "seed.motion";
 /// Name of the seed clip's music tensor.
 pub const SEED_MUSIC: &str = "seed.music";
+/// Name of the style embedding `[styles, d_model]` (one row per [`crate::style::DanceStyle`]).
+pub const STYLE_EMBEDDING: &str = "embed.style";
 
 /// A tensor's shape and row-major values.
 #[derive(Clone, Debug, PartialEq)]
@@ -196,6 +198,9 @@ pub fn init_net(c: &NetConfig, seed: u64) -> NamedTensors {
     let d = c.d_model;
     dense(&mut t, &mut rng, "embed", c.token_dim(), d, false);
     t.insert("embed.none", &[d], vec![0.0; d]);
+    if c.styles > 0 {
+        t.insert(STYLE_EMBEDDING, &[c.styles, d], vec![0.0; c.styles * d]);
+    }
     for l in 0..c.layers {
         let p = format!("layer{l}");
         layer_norm(&mut t, &format!("{p}.ln1"), d);

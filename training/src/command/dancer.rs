@@ -16,7 +16,7 @@ use model::neural::rng::Rng;
 use model::neural::tensors::init_net;
 use model::neural::token::Normalizer;
 
-use crate::train::{Batch, Corpus, Trainer};
+use crate::train::{Batch, Corpus, DanceInput, Trainer};
 
 /// Options of `danced-train dancer`.
 #[derive(clap::Args, Debug, Clone)]
@@ -60,6 +60,17 @@ pub struct TrainArgs {
     /// Fraction of sequences trained without a key pose.
     #[arg(long, default_value_t = 0.3)]
     pub key_drop: f64,
+    /// Train the next-pose likelihood alone, without the auxiliary future-pose heads (the
+    /// recipe before issue 21).
+    #[arg(long)]
+    pub no_aux: bool,
+    /// Build a network without a style input (the architecture before issue 21).
+    #[arg(long)]
+    pub no_style: bool,
+    /// Also train on every training dance played at these speeds with its song (varispeed,
+    /// e.g. `0.8,1.25,1.5`: a dance of 87 BPM at 70, 109 and 130 BPM), comma-separated.
+    #[arg(long, value_delimiter = ',', value_parser = parse_speed)]
+    pub speeds: Vec<f64>,
     /// Threads building the dances.
     #[arg(long, default_value_t = 1)]
     pub jobs: usize,
@@ -71,29 +82,41 @@ pub struct TrainArgs {
     pub tiny: bool,
 }
 
-fn load_dances(data: &Path, jobs: usize) -> Result<Vec<BuiltDance>> {
-    let built: Vec<BuiltDance> = daemon::dataset::build_all(data, jobs, |_, _| true, true)?
-        .into_iter()
-        .filter_map(|(_, r)| r.ok())
-        .filter(|d| !d.music.is_empty())
-        .collect();
+fn parse_speed(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.25..=4.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: a speed is a number in 0.25..=4")),
+    }
+}
+
+fn load_dances(data: &Path, jobs: usize, speeds: &[f64]) -> Result<Vec<BuiltDance>> {
+    let built: Vec<BuiltDance> =
+        daemon::dataset::build_all_at_speeds(data, jobs, speeds, |_, _| true, true)?
+            .into_iter()
+            .filter_map(|(_, r)| r.ok())
+            .filter(|d| !d.music.is_empty())
+            .collect();
     if built.is_empty() {
         bail!("no dance with music could be built from {}", data.display());
     }
     Ok(built)
 }
 
-/// A training dance's mirror image (owned motion) with the dance's music.
-type MirroredDance<'a> = (Vec<[f32; MOTION_FEATURE_DIM]>, &'a [[f32; FEATURE_DIM]]);
+/// A training dance's mirror image (owned motion) with the dance's music and style.
+type MirroredDance<'a> = (
+    Vec<[f32; MOTION_FEATURE_DIM]>,
+    &'a [[f32; FEATURE_DIM]],
+    Option<usize>,
+);
 
-/// A dance's motion and its frame-aligned music.
-type DancePair<'a> = (&'a [[f32; MOTION_FEATURE_DIM]], &'a [[f32; FEATURE_DIM]]);
-
-fn pairs(dances: &[BuiltDance], validation: bool) -> Vec<DancePair<'_>> {
+fn pairs(dances: &[BuiltDance], validation: bool) -> Vec<DanceInput<'_>> {
     dances
         .iter()
         .filter(|d| d.validation == validation)
-        .map(|d| (&d.motion[..], &d.music[..]))
+        .map(|d| {
+            let style = model::style::DanceStyle::of_tang_dance(&d.name).map(|s| s.index());
+            (&d.motion[..], &d.music[..], style)
+        })
         .collect()
 }
 
@@ -116,17 +139,23 @@ fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
 /// Runs `danced-train dancer`.
 pub fn train(args: &TrainArgs) -> Result<()> {
     let started_loading = Instant::now();
-    let dances = on_default_rig(load_dances(&args.data, args.jobs)?);
+    let dances = on_default_rig(load_dances(&args.data, args.jobs, &args.speeds)?);
     let mut train_pairs = pairs(&dances, false);
     let mirrored: Vec<MirroredDance> = if args.mirror {
         train_pairs
             .iter()
-            .map(|(m, a)| (m.iter().map(model::motion::mirror_features).collect(), *a))
+            .map(|(m, a, style)| {
+                (
+                    m.iter().map(model::motion::mirror_features).collect(),
+                    *a,
+                    *style,
+                )
+            })
             .collect()
     } else {
         Vec::new()
     };
-    train_pairs.extend(mirrored.iter().map(|(m, a)| (&m[..], *a)));
+    train_pairs.extend(mirrored.iter().map(|(m, a, style)| (&m[..], *a, *style)));
     let train_names: Vec<String> = dances
         .iter()
         .filter(|d| !d.validation)
@@ -139,11 +168,14 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             false,
         ),
         None => {
-            let config = if args.tiny {
+            let mut config = if args.tiny {
                 NetConfig::tiny()
             } else {
                 NetConfig::default()
             };
+            if args.no_style {
+                config.styles = 0;
+            }
             let mut m = NeuralModel {
                 config,
                 tensors: init_net(&config, args.seed),
@@ -228,7 +260,15 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         args.key_drop,
         args.input_noise,
         args.music_drop
-    ) + if args.mirror { " --mirror" } else { "" };
+    ) + if args.mirror { " --mirror" } else { "" }
+        + if args.no_aux { " --no-aux" } else { "" }
+        + if args.no_style { " --no-style" } else { "" }
+        + &if args.speeds.is_empty() {
+            String::new()
+        } else {
+            let list: Vec<String> = args.speeds.iter().map(f64::to_string).collect();
+            format!(" --speeds {}", list.join(","))
+        };
     model.training.recipe = if previous.recipe.is_empty() {
         recipe
     } else {
@@ -271,7 +311,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         let progress = started.elapsed().as_secs_f64() / budget.as_secs_f64().max(1e-9);
         let lr = learning_rate(args.lr, step, progress);
         let batch = corpus.random_batch(&mut rng, args.batch, args.key_drop);
-        let loss = trainer.step(&batch, lr) as f64;
+        let loss = trainer.step(&batch, lr, !args.no_aux) as f64;
         bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
         if bad_steps >= 20 {
             bail!(
