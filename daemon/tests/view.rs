@@ -213,10 +213,23 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
         page.eval("[window.danced.status, window.danced.beats]")
     );
 
+    // The style selector, as a performer would change it.
+    let chosen = page
+        .eval(
+            "const s = document.getElementById('styleSelect'); s.value = 'rumba'; \
+             s.dispatchEvent(new Event('change')); true",
+        )
+        .unwrap();
+    assert_eq!(chosen, serde_json::Value::Bool(true));
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while ctx.stats.controls_accepted.load(Ordering::Relaxed) < 6 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
     // The presses went through the control path (validated and counted like OSC's).
     let applied = ctx.stats.controls_accepted.load(Ordering::Relaxed);
-    assert_eq!(applied, 5, "controls applied");
-    assert_eq!(server.report().controls_accepted, 5);
+    assert_eq!(applied, 6, "controls applied");
+    assert_eq!(server.report().controls_accepted, 6);
     assert_eq!(server.report().controls_ignored, 0);
 
     let png = page.screenshot_png().unwrap();

@@ -266,9 +266,17 @@ impl Corpus {
     /// most extreme normalised pose value is smallest. A seed at the edge of the data (an arm
     /// raised 3σ) sends the free-running model off the data's range in a few frames.
     pub fn typical_seed(&self) -> Option<(usize, usize)> {
+        self.typical_seed_of(None)
+    }
+
+    /// [`Self::typical_seed`] among the dances of style `style` (None: every dance).
+    pub fn typical_seed_of(&self, style: Option<usize>) -> Option<(usize, usize)> {
         let (n, l) = (self.config.window, self.config.lookahead);
         let mut best: Option<(f32, usize, usize)> = None;
         for (i, d) in self.dances.iter().enumerate() {
+            if style.is_some() && d.style != style {
+                continue;
+            }
             let frame_max: Vec<f32> = d
                 .motion
                 .chunks_exact(P)

@@ -75,6 +75,9 @@ pub struct NeuralDancer {
     runtime: Runtime,
     norm: Normalizer,
     seed_motion: Vec<f32>,
+    /// Per style (by index), its own seed clip, normalised (motion, music); empty for a model
+    /// without them, or after [`NeuralDancer::set_seed_pose`].
+    style_seeds: Vec<Option<(Vec<f32>, Vec<f32>)>>,
     seed_music: Vec<f32>,
     low: Vec<f32>,
     high: Vec<f32>,
@@ -134,6 +137,27 @@ impl NeuralDancer {
         {
             norm.music(raw, out);
         }
+        let style_seeds = (0..model.config.styles)
+            .map(|i| {
+                model.style_seed_clip(i).map(|(motion, music)| {
+                    let mut m = vec![0.0; motion.len()];
+                    for (raw, out) in motion
+                        .chunks_exact(MOTION_FEATURE_DIM)
+                        .zip(m.chunks_exact_mut(MOTION_FEATURE_DIM))
+                    {
+                        norm.pose(raw, out);
+                    }
+                    let mut x = vec![0.0; music.len()];
+                    for (raw, out) in music
+                        .chunks_exact(FEATURE_DIM)
+                        .zip(x.chunks_exact_mut(FEATURE_DIM))
+                    {
+                        norm.music(raw, out);
+                    }
+                    (m, x)
+                })
+            })
+            .collect();
         let (lo, hi) = model.pose_range()?;
         let (mut low, mut high) = (vec![0.0; MOTION_FEATURE_DIM], vec![0.0; MOTION_FEATURE_DIM]);
         let (mut l, mut h) = (vec![0.0; MOTION_FEATURE_DIM], vec![0.0; MOTION_FEATURE_DIM]);
@@ -163,6 +187,7 @@ impl NeuralDancer {
             varying,
             previous: vec![0.0; MOTION_FEATURE_DIM],
             seed_motion,
+            style_seeds,
             seed_music,
             decoder: MotionDecoder::new(RootState::ORIGIN),
             rng: Rng::new(0),
@@ -200,6 +225,7 @@ impl NeuralDancer {
     /// Replaces the seed clip's motion by standing still in one pose (raw motion features):
     /// the "motion prompt" the dance starts from. Takes effect at the next reset.
     pub fn set_seed_pose(&mut self, features: &[f32; MOTION_FEATURE_DIM]) {
+        self.style_seeds.clear();
         for row in self.seed_motion.chunks_exact_mut(MOTION_FEATURE_DIM) {
             self.norm.pose(features, row);
         }
@@ -241,20 +267,25 @@ impl NeuralDancer {
     }
 
     /// Pushes the seed clip through the cache; the next frame continues it.
+    /// The seed clip of the style danced now (its own, where the model has one).
     fn prime(&mut self) {
         self.runtime.reset();
-        let n = self.seed_motion.len() / MOTION_FEATURE_DIM;
+        let (seed_motion, seed_music) = match self.style_seeds.get(self.style.index()) {
+            Some(Some((m, x))) => (m, x),
+            _ => (&self.seed_motion, &self.seed_music),
+        };
+        let n = seed_motion.len() / MOTION_FEATURE_DIM;
         for f in 1..n {
             token::fill(
                 &mut self.token,
-                &self.seed_motion[(f - 1) * MOTION_FEATURE_DIM..f * MOTION_FEATURE_DIM],
-                &self.seed_music[f * FEATURE_DIM..(f + 1) * FEATURE_DIM],
+                &seed_motion[(f - 1) * MOTION_FEATURE_DIM..f * MOTION_FEATURE_DIM],
+                &seed_music[f * FEATURE_DIM..(f + 1) * FEATURE_DIM],
                 None,
             );
             self.runtime.push(&self.token);
         }
         self.previous
-            .copy_from_slice(&self.seed_motion[(n - 1) * MOTION_FEATURE_DIM..]);
+            .copy_from_slice(&seed_motion[(n - 1) * MOTION_FEATURE_DIM..]);
         self.norm.unpose(&self.previous, &mut self.previous_raw);
     }
 
@@ -335,11 +366,21 @@ impl MotionSource for NeuralDancer {
             Some(frame) => self.style_from_music.push(frame),
             None => self.style_from_music.style(),
         };
-        self.style = match controls.style {
+        let style = match controls.style {
             StyleRequest::Auto => heard,
             StyleRequest::Style(s) => s,
         };
+        let changed = style != self.style;
+        self.style = style;
         self.runtime.set_style(Some(self.style.index()));
+        if changed && matches!(self.style_seeds.get(style.index()), Some(Some(_))) {
+            // A new style starts from its own seed clip, as a restart does (a window of tokens
+            // in one frame), gliding there: its label over another style's motion is a context
+            // training never saw, and from it the network ran off the data within seconds.
+            self.prime();
+            self.glide_from = self.last_good;
+            self.glide_left = RESTART_BLEND_FRAMES;
+        }
         let key = controls.key_pose.map(|k| {
             token::key_rotations(&k.rotations, &mut self.key_raw);
             self.norm.key(&self.key_raw, &mut self.key);
@@ -601,6 +642,51 @@ mod tests {
         let a = styled_run(&mut old, StyleRequest::Style(DanceStyle::ChaCha));
         let b = styled_run(&mut old, StyleRequest::Style(DanceStyle::Rumba));
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn a_style_with_its_own_seed_clip_starts_from_it_and_one_without_keeps_the_dance() {
+        let c = NetConfig::tiny();
+        let mut tensors = init_net(&c, 1);
+        tensors.perturb(2, 0.05);
+        let plain = NeuralModel {
+            config: c,
+            tensors,
+            training: TrainingSummary::default(),
+        };
+        // A cha-cha seed: the default clip standing still in its first pose.
+        let mut seeded = plain.clone();
+        let (motion, music) = seeded.seed_clip().unwrap();
+        let first = motion[..MOTION_FEATURE_DIM].to_vec();
+        let still: Vec<f32> = first.iter().cycle().take(motion.len()).copied().collect();
+        let music = music.to_vec();
+        seeded.set_style_seed_clip(DanceStyle::ChaCha.index(), still, music);
+        assert!(seeded.style_seed_clip(DanceStyle::ChaCha.index()).is_some());
+        assert!(seeded.style_seed_clip(DanceStyle::Rumba.index()).is_none());
+        let mut with = NeuralDancer::new(&seeded).unwrap();
+        let mut without = NeuralDancer::new(&plain).unwrap();
+        let cha_cha = StyleRequest::Style(DanceStyle::ChaCha);
+        let rumba = StyleRequest::Style(DanceStyle::Rumba);
+        // The switch to cha-cha re-primes from its clip: another dance from the first frame.
+        let a = styled_run(&mut with, cha_cha);
+        let b = styled_run(&mut without, cha_cha);
+        assert_ne!(a[0], b[0]);
+        assert!(a.iter().all(|p| p.is_finite()));
+        // It glides there from where the dancer stood, as a restart does.
+        with.reset(5);
+        let mut pose = Pose::rest();
+        let controls = Controls {
+            style: cha_cha,
+            ..Controls::default()
+        };
+        with.step(&[[0.1f32; FEATURE_DIM]; 3], &controls, &mut pose);
+        assert_eq!(with.glide_left, RESTART_BLEND_FRAMES - 1);
+        assert_eq!(counts(&with).restarts, 0);
+        // A style without its own clip goes on from the dance as it stands, in both models.
+        assert_eq!(
+            styled_run(&mut with, rumba),
+            styled_run(&mut without, rumba)
+        );
     }
 
     /// Horizontal distance the hips cover in the first frame after a reset with `accent`, on

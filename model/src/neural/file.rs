@@ -141,6 +141,14 @@ fn crc32(bytes: &[u8]) -> u32 {
     crc.sum()
 }
 
+/// Tensor names of style `index`'s seed clip (motion, music).
+fn style_seed_names(index: usize) -> (String, String) {
+    (
+        format!("{SEED_MOTION}.style{index}"),
+        format!("{SEED_MUSIC}.style{index}"),
+    )
+}
+
 impl NeuralModel {
     /// The seed clip ("motion prompt"): raw motion features of `window` frames and, row for
     /// row, the raw music frame each of them was heard with `lookahead` frames earlier (the
@@ -152,6 +160,28 @@ impl NeuralModel {
             self.tensors
                 .get(SEED_MUSIC, &[n, dsp::feature::FEATURE_DIM])?,
         ))
+    }
+
+    /// The seed clip of style `index` (see [`crate::style::DanceStyle`]), as
+    /// [`Self::seed_clip`]; None where the file has none (models before per-style seeds).
+    pub fn style_seed_clip(&self, index: usize) -> Option<(&[f32], &[f32])> {
+        let n = self.config.window;
+        let (motion, music) = style_seed_names(index);
+        Some((
+            self.tensors.get(&motion, &[n, MOTION_FEATURE_DIM]).ok()?,
+            self.tensors
+                .get(&music, &[n, dsp::feature::FEATURE_DIM])
+                .ok()?,
+        ))
+    }
+
+    /// Stores the seed clip of style `index` (raw, as [`Self::set_seed_clip`]).
+    pub fn set_style_seed_clip(&mut self, index: usize, motion: Vec<f32>, music: Vec<f32>) {
+        let n = self.config.window;
+        let (m, x) = style_seed_names(index);
+        self.tensors.insert(&m, &[n, MOTION_FEATURE_DIM], motion);
+        self.tensors
+            .insert(&x, &[n, dsp::feature::FEATURE_DIM], music);
     }
 
     /// The range of every raw pose feature in the training data (lowest, highest).

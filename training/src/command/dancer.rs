@@ -214,6 +214,20 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         .seed_clip(&norm, seed_dance, seed_start)
         .context("no training dance is longer than one window")?;
     model.set_seed_clip(motion, music);
+    // One seed clip per style, so a dance of that style starts (and restarts) from its own
+    // motion: a cha-cha asked for over a waltz's context is a combination training never saw.
+    for style in 0..config.styles {
+        if let Some((dance, start)) = corpus.typical_seed_of(Some(style))
+            && let Some((motion, music)) = corpus.seed_clip(&norm, dance, start)
+        {
+            eprintln!(
+                "seed clip of style {style}: {}, frames {start}..{}",
+                train_names.get(dance).map_or("?", |s| s.as_str()),
+                start + config.window
+            );
+            model.set_style_seed_clip(style, motion, music);
+        }
+    }
     let all_training_frames: Vec<_> = train_pairs
         .iter()
         .flat_map(|p| p.0.iter().copied())
