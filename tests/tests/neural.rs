@@ -176,3 +176,56 @@ fn stepping_the_dancer_does_not_allocate() {
     assert_eq!(daemon::alloc_counter::callback_allocations() - before, 0);
     assert!(pose.is_finite());
 }
+
+#[test]
+fn switching_styles_with_their_own_seed_clips_does_not_allocate() {
+    use model::neural::config::NetConfig;
+    use model::neural::file::{NeuralModel, TrainingSummary};
+    use model::style::{DanceStyle, StyleRequest};
+    // A network with a style input and a seed clip per style (the shipped model has neither).
+    let config = NetConfig::tiny();
+    let mut model = NeuralModel {
+        config,
+        tensors: model::neural::tensors::init_net(&config, 3),
+        training: TrainingSummary::default(),
+    };
+    let (motion, music) = model.seed_clip().unwrap();
+    let (motion, music) = (motion.to_vec(), music.to_vec());
+    for style in DanceStyle::ALL {
+        model.set_style_seed_clip(style.index(), motion.clone(), music.clone());
+    }
+    let mut dancer = NeuralDancer::new(&model).unwrap();
+    let (music, _) = common::demo_music(8.0, 25.0);
+    let look = dancer.lookahead_frames();
+    let mut pose = Pose::rest();
+    // The counter counts on this thread (the proof would be empty otherwise).
+    let before = daemon::alloc_counter::callback_allocations();
+    daemon::alloc_counter::in_callback(|| drop(std::hint::black_box(vec![0u8; 64])));
+    assert!(daemon::alloc_counter::callback_allocations() > before);
+    let before = daemon::alloc_counter::callback_allocations();
+    let mut switches = 0;
+    daemon::alloc_counter::in_callback(|| {
+        let mut last = None;
+        for i in 0..music.len() - look {
+            // A new style every 20 frames, through every style and auto.
+            let style = match i % 100 / 20 {
+                4 => StyleRequest::Auto,
+                k => StyleRequest::Style(DanceStyle::ALL[k]),
+            };
+            dancer.step(
+                &music[i..=i + look],
+                &Controls {
+                    temperature: 0.5,
+                    style,
+                    ..Controls::default()
+                },
+                &mut pose,
+            );
+            switches += usize::from(last.is_some_and(|s| s != dancer.style()));
+            last = Some(dancer.style());
+        }
+    });
+    assert_eq!(daemon::alloc_counter::callback_allocations() - before, 0);
+    assert!(switches >= 8, "{switches} style changes");
+    assert!(pose.is_finite());
+}
