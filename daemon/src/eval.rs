@@ -398,14 +398,8 @@ impl EvalSet {
         let skeleton = Skeleton::default_adult();
         let mut confusion = [[0usize; 4]; 4];
         for (m, d) in motions.iter().zip(&self.validation) {
-            let Some(style) = style_of(&d.name) else {
-                continue;
-            };
-            let p = skeleton.trajectory(m);
-            for w in windows_of(&p, (STYLE_WINDOW_S * TANG_FPS) as usize) {
-                if let Some(named) = classifier.classify(&w) {
-                    confusion[style][named] += 1;
-                }
+            if let Some(style) = style_of(&d.name) {
+                tally_windows(classifier, &skeleton, m, &mut confusion[style]);
             }
         }
         Some(confusion)
@@ -424,21 +418,12 @@ impl EvalSet {
         let mut confusion = [[0usize; 4]; 4];
         for style in DanceStyle::ALL {
             for d in &self.validation {
-                let look = source.lookahead_frames();
-                source.reset(seed);
-                let frames = d.music.len().saturating_sub(look);
-                let m =
-                    crate::motion_lag::dance_stream(source, &d.music, 0, frames, |_| Controls {
-                        temperature,
-                        style: StyleRequest::Style(style),
-                        ..Controls::default()
-                    });
-                let p = skeleton.trajectory(&m);
-                for w in windows_of(&p, (STYLE_WINDOW_S * TANG_FPS) as usize) {
-                    if let Some(named) = classifier.classify(&w) {
-                        confusion[style.index()][named] += 1;
-                    }
-                }
+                let m = dance_with(source, &d.music, d.music.len(), seed, |_| Controls {
+                    temperature,
+                    style: StyleRequest::Style(style),
+                    ..Controls::default()
+                });
+                tally_windows(classifier, &skeleton, &m, &mut confusion[style.index()]);
             }
         }
         Some(confusion)
@@ -516,15 +501,42 @@ pub fn dance_to(
     cues: &[KeyCue],
     lead: usize,
 ) -> Vec<Pose> {
-    let look = source.lookahead_frames();
-    source.reset(seed);
-    let frames = frames.min(music.len().saturating_sub(look));
-    crate::motion_lag::dance_stream(source, music, 0, frames, |i| Controls {
+    dance_with(source, music, frames, seed, |i| Controls {
         temperature,
         key_pose: target_at(cues, i, lead),
         beat_accent: None,
         style: StyleRequest::Auto,
     })
+}
+
+/// Runs `source` (reset with `seed`) over `frames` frames of `music` (fewer where its
+/// look-ahead runs past the end) with the controls `controls` gives each frame.
+fn dance_with(
+    source: &mut dyn MotionSource,
+    music: &[[f32; dsp::feature::FEATURE_DIM]],
+    frames: usize,
+    seed: u64,
+    controls: impl FnMut(usize) -> Controls,
+) -> Vec<Pose> {
+    let look = source.lookahead_frames();
+    source.reset(seed);
+    let frames = frames.min(music.len().saturating_sub(look));
+    crate::motion_lag::dance_stream(source, music, 0, frames, controls)
+}
+
+/// Adds the style `classifier` names for each [`STYLE_WINDOW_S`] window of `motion` to `row`.
+fn tally_windows(
+    classifier: &StyleClassifier,
+    skeleton: &Skeleton,
+    motion: &[Pose],
+    row: &mut [usize; 4],
+) {
+    let p = skeleton.trajectory(motion);
+    for w in windows_of(&p, (STYLE_WINDOW_S * TANG_FPS) as usize) {
+        if let Some(named) = classifier.classify(&w) {
+            row[named] += 1;
+        }
+    }
 }
 
 /// Tempo bands of the music-side table, BPM (lower bound inclusive).

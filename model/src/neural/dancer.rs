@@ -123,39 +123,12 @@ impl NeuralDancer {
         let runtime = Runtime::new(&model.tensors, &model.config)?;
         let norm = model.normalizer()?;
         let (motion, music) = model.seed_clip()?;
-        let mut seed_motion = vec![0.0; motion.len()];
-        for (raw, out) in motion
-            .chunks_exact(MOTION_FEATURE_DIM)
-            .zip(seed_motion.chunks_exact_mut(MOTION_FEATURE_DIM))
-        {
-            norm.pose(raw, out);
-        }
-        let mut seed_music = vec![0.0; music.len()];
-        for (raw, out) in music
-            .chunks_exact(FEATURE_DIM)
-            .zip(seed_music.chunks_exact_mut(FEATURE_DIM))
-        {
-            norm.music(raw, out);
-        }
+        let (seed_motion, seed_music) = normalised_clip(&norm, motion, music);
         let style_seeds = (0..model.config.styles)
             .map(|i| {
-                model.style_seed_clip(i).map(|(motion, music)| {
-                    let mut m = vec![0.0; motion.len()];
-                    for (raw, out) in motion
-                        .chunks_exact(MOTION_FEATURE_DIM)
-                        .zip(m.chunks_exact_mut(MOTION_FEATURE_DIM))
-                    {
-                        norm.pose(raw, out);
-                    }
-                    let mut x = vec![0.0; music.len()];
-                    for (raw, out) in music
-                        .chunks_exact(FEATURE_DIM)
-                        .zip(x.chunks_exact_mut(FEATURE_DIM))
-                    {
-                        norm.music(raw, out);
-                    }
-                    (m, x)
-                })
+                model
+                    .style_seed_clip(i)
+                    .map(|(motion, music)| normalised_clip(&norm, motion, music))
             })
             .collect();
         let (lo, hi) = model.pose_range()?;
@@ -353,7 +326,8 @@ impl MotionSource for NeuralDancer {
 
     fn step(&mut self, music: &[[f32; FEATURE_DIM]], controls: &Controls, out: &mut Pose) {
         // Short music (the stream's end) repeats its last frame; none at all reads as the mean.
-        match music.get(self.lookahead_frames()).or(music.last()) {
+        let heard_frame = music.get(self.lookahead_frames()).or(music.last());
+        match heard_frame {
             Some(frame) => self.norm.music(frame, &mut self.music),
             None => self.music.fill(0.0),
         }
@@ -362,7 +336,7 @@ impl MotionSource for NeuralDancer {
                 *v = 0.0;
             }
         }
-        let heard = match music.get(self.lookahead_frames()).or(music.last()) {
+        let heard = match heard_frame {
             Some(frame) => self.style_from_music.push(frame),
             None => self.style_from_music.style(),
         };
@@ -526,6 +500,25 @@ impl MotionSource for NeuralDancer {
         // The correlated noise carries on from its current value, so the pose glides.
         self.rng = Rng::new(seed);
     }
+}
+
+/// A raw seed clip (motion rows, music rows) normalised with `norm`.
+fn normalised_clip(norm: &Normalizer, motion: &[f32], music: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let mut m = vec![0.0; motion.len()];
+    for (raw, out) in motion
+        .chunks_exact(MOTION_FEATURE_DIM)
+        .zip(m.chunks_exact_mut(MOTION_FEATURE_DIM))
+    {
+        norm.pose(raw, out);
+    }
+    let mut x = vec![0.0; music.len()];
+    for (raw, out) in music
+        .chunks_exact(FEATURE_DIM)
+        .zip(x.chunks_exact_mut(FEATURE_DIM))
+    {
+        norm.music(raw, out);
+    }
+    (m, x)
 }
 
 /// A beat accent depth in [0, 0.9] (non-finite: 0).
