@@ -470,10 +470,25 @@ pub fn resample_poses(poses: &[model::rig::Pose], speed: f64) -> Vec<model::rig:
     }
     let last = poses.len() - 1;
     let frames = (last as f64 / speed).floor() as usize + 1;
+    let times: Vec<f64> = (0..frames).map(|j| j as f64 * speed).collect();
+    warp_poses(poses, &times)
+}
+
+/// Frame j shows `poses` at fractional frame `times[j]` (clamped to the dance; root lerp,
+/// rotations slerp).
+pub fn warp_poses(poses: &[model::rig::Pose], times: &[f64]) -> Vec<model::rig::Pose> {
+    let Some(last) = poses.len().checked_sub(1) else {
+        return Vec::new();
+    };
     let mut pose = model::rig::Pose::rest();
-    (0..frames)
-        .map(|j| {
-            let x = j as f64 * speed;
+    times
+        .iter()
+        .map(|&x| {
+            let x = if x.is_finite() {
+                x.clamp(0.0, last as f64)
+            } else {
+                0.0
+            };
             let a = (x.floor() as usize).min(last);
             let b = (a + 1).min(last);
             let w = (x - a as f64) as f32;
@@ -484,6 +499,49 @@ pub fn resample_poses(poses: &[model::rig::Pose], speed: f64) -> Vec<model::rig:
             pose
         })
         .collect()
+}
+
+/// The source times of a dance retimed within each beat, as the neural dancer's beat accent
+/// retimes it live: time runs at pace 1 − depth·cos(beat phase) of the music heard at each
+/// frame (`music`, frame for frame), slowest on the beat, fastest between beats. Over a whole
+/// beat the pace averages 1, so the dance keeps its place in the song (within depth/2π of a
+/// beat). Ends where the source runs out (`frames` source frames).
+pub fn beat_retime_times(
+    music: &[[f32; dsp::feature::FEATURE_DIM]],
+    frames: usize,
+    depth: f64,
+) -> Vec<f64> {
+    let last = frames.saturating_sub(1) as f64;
+    let mut times = Vec::with_capacity(music.len().min(frames));
+    let mut t = 0.0;
+    for m in music.iter().take(frames) {
+        if t > last {
+            break;
+        }
+        times.push(t);
+        let cos = f64::from(m[dsp::feature::FeatureLayout::BEAT_COS]).clamp(-1.0, 1.0);
+        let cos = if cos.is_finite() { cos } else { 0.0 };
+        t += 1.0 - depth * cos;
+    }
+    times
+}
+
+impl BuiltDance {
+    /// This dance retimed within each beat by [`beat_retime_times`] (its motion as it is,
+    /// on whichever rig; music unchanged, cut to the retimed length): training data whose
+    /// speed dips on the beat, so the network learns the accent from its beat input.
+    pub fn beat_retimed(&self, depth: f64) -> BuiltDance {
+        let mut poses = Vec::new();
+        model::motion::decode(&self.motion, model::motion::RootState::ORIGIN, &mut poses);
+        let times = beat_retime_times(&self.music, poses.len(), depth);
+        let warped = warp_poses(&poses, &times);
+        let mut out = self.clone();
+        out.motion.clear();
+        model::motion::encode(&warped, &mut out.motion);
+        out.music.truncate(out.motion.len());
+        out.motion.truncate(out.music.len());
+        out
+    }
 }
 
 /// Every dance under `data/tang2018` that `wanted` accepts, built by [`build_dances`] with
@@ -661,5 +719,44 @@ mod tests {
         assert_eq!(resample_poses(&poses, 1.0), poses);
         assert_eq!(resample_poses(&poses, f64::NAN), poses);
         assert!(resample_poses(&[], 1.5).is_empty());
+    }
+
+    #[test]
+    fn beat_retime_slows_on_the_beat_and_keeps_its_place() {
+        use dsp::feature::{FEATURE_DIM, FeatureLayout};
+        // A 20-frame beat: the music's beat phase at every frame.
+        let frames = 200;
+        let music: Vec<[f32; FEATURE_DIM]> = (0..frames)
+            .map(|i| {
+                let mut m = [0.0; FEATURE_DIM];
+                let phase = std::f64::consts::TAU * i as f64 / 20.0;
+                m[FeatureLayout::BEAT_COS] = phase.cos() as f32;
+                m
+            })
+            .collect();
+        let times = beat_retime_times(&music, frames, 0.3);
+        // On the beat time runs at 0.7, half a beat later at 1.3.
+        assert!((times[1] - times[0] - 0.7).abs() < 1e-6);
+        assert!((times[11] - times[10] - 1.3).abs() < 1e-6);
+        // After whole beats the dance is back in its place; in between within depth/2π of a
+        // beat and a frame's step.
+        assert!((times[100] - 100.0).abs() < 1e-3, "{}", times[100]);
+        let drift = times.iter().enumerate().map(|(i, t)| (t - i as f64).abs());
+        let drift = drift.fold(0.0, f64::max);
+        assert!(
+            drift > 0.8 && drift <= 0.3 * (20.0 / std::f64::consts::TAU + 1.0),
+            "{drift}"
+        );
+        assert!(*times.last().unwrap() <= (frames - 1) as f64);
+        // A steady walk retimed moves slowest on the beat.
+        let poses = walk(frames);
+        let warped = warp_poses(&poses, &times);
+        let step = |i: usize| warped[i + 1].root_position.x - warped[i].root_position.x;
+        assert!((step(40) - 0.07).abs() < 1e-4, "{}", step(40));
+        assert!((step(50) - 0.13).abs() < 1e-4, "{}", step(50));
+        // Out-of-range and non-finite times are clamped, not read past the end.
+        let clamped = warp_poses(&poses, &[-1.0, f64::NAN, 1e9]);
+        assert_eq!(clamped, vec![poses[0], poses[0], poses[frames - 1]]);
+        assert!(warp_poses(&[], &[0.0]).is_empty());
     }
 }

@@ -59,6 +59,10 @@ pub struct Corpus {
     sequence: usize,
     input_noise: f32,
     music_drop: f64,
+    style_drop: f64,
+    /// Cumulative sampling weight of each dance when styles are balanced (empty: every frame
+    /// equally likely).
+    balanced: Vec<f64>,
 }
 
 /// Width of a batch's style rows (the network's style count; 0 = no style input).
@@ -120,7 +124,67 @@ impl Corpus {
             sequence,
             input_noise: INPUT_NOISE,
             music_drop: 0.0,
+            style_drop: 0.0,
+            balanced: Vec::new(),
         }
+    }
+
+    /// Sets the fraction of training sequences whose style input is hidden (all zeros), so
+    /// the network also learns to dance without one and a style acts as a shift from there.
+    pub fn set_style_drop(&mut self, p: f64) {
+        self.style_drop = p.clamp(0.0, 1.0);
+    }
+
+    /// Re-weights sampling between styles: each style's share of sequences goes as its frames
+    /// to the power `1 − balance` (0: every frame equally likely, so 25 waltzes drown 4
+    /// cha-chas; 1: every style equally often; dances without a style form one group).
+    /// Within a style, a dance is drawn in proportion to its length.
+    pub fn set_style_balance(&mut self, balance: f64) {
+        let balance = balance.clamp(0.0, 1.0);
+        if balance == 0.0 {
+            self.balanced.clear();
+            return;
+        }
+        let mut style_frames = std::collections::HashMap::new();
+        for d in &self.dances {
+            *style_frames.entry(d.style).or_insert(0usize) += d.frames;
+        }
+        let mut sum = 0.0;
+        self.balanced = self
+            .dances
+            .iter()
+            .map(|d| {
+                let group = style_frames[&d.style] as f64;
+                sum += d.frames as f64 * group.powf(-balance);
+                sum
+            })
+            .collect();
+    }
+
+    /// Fraction of sequences each style gets (by style index; None: dances without a style).
+    pub fn style_shares(&self) -> Vec<(Option<usize>, f64)> {
+        let mut shares: Vec<(Option<usize>, f64)> = Vec::new();
+        let mut previous = 0.0;
+        for (i, d) in self.dances.iter().enumerate() {
+            let w = match self.balanced.get(i) {
+                Some(&c) => {
+                    let w = c - previous;
+                    previous = c;
+                    w
+                }
+                None => d.frames as f64,
+            };
+            match shares.iter_mut().find(|(s, _)| *s == d.style) {
+                Some(entry) => entry.1 += w,
+                None => shares.push((d.style, w)),
+            }
+        }
+        let total: f64 = shares.iter().map(|s| s.1).sum();
+        for s in &mut shares {
+            s.1 /= total.max(f64::MIN_POSITIVE);
+        }
+        shares.sort_by_key(|s| s.0);
+        shares
     }
 
     /// Sets the noise on the previous pose of training tokens (normalised units).
@@ -159,7 +223,13 @@ impl Corpus {
             Some(rng) => rng.uniform() < self.music_drop,
             None => false,
         };
+        // Drawn only when asked for, so runs without style drop keep their random stream.
+        let no_style = match noise.as_mut() {
+            Some(rng) if self.style_drop > 0.0 => rng.uniform() < self.style_drop,
+            _ => false,
+        };
         let d = &self.dances[dance];
+        let style = if no_style { None } else { d.style };
         let (s, l) = (self.sequence, self.config.lookahead);
         let mut tok = vec![0.0; TOKEN_DIM];
         let width = style_width(&self.config);
@@ -198,7 +268,7 @@ impl Corpus {
             }
             let n = batch.styles.len();
             batch.styles.resize(n + width, 0.0);
-            if let Some(style) = d.style {
+            if let Some(style) = style {
                 batch.styles[n + style] = 1.0;
             }
             for (h, future) in AUX_HORIZONS.iter().zip(batch.futures.iter_mut()) {
@@ -216,12 +286,23 @@ impl Corpus {
         // Dances are drawn in proportion to their length, so every frame is equally likely.
         let total = self.frames();
         for _ in 0..sequences {
-            let mut pick = rng.below(total);
-            let mut dance = 0;
-            while pick >= self.dances[dance].frames {
-                pick -= self.dances[dance].frames;
-                dance += 1;
-            }
+            let dance = match self.balanced.last() {
+                Some(&sum) => {
+                    let pick = rng.uniform() * sum;
+                    self.balanced
+                        .partition_point(|&c| c <= pick)
+                        .min(self.dances.len() - 1)
+                }
+                None => {
+                    let mut pick = rng.below(total);
+                    let mut dance = 0;
+                    while pick >= self.dances[dance].frames {
+                        pick -= self.dances[dance].frames;
+                        dance += 1;
+                    }
+                    dance
+                }
+            };
             let n = self.dances[dance].frames;
             let start = 1 + rng.below(n - s - l);
             let key = (rng.uniform() >= key_drop).then(|| {
@@ -507,5 +588,50 @@ mod tests {
         assert_eq!(a.len(), c.window * M);
         // The seed is raw motion: the frames themselves, not their normalised values.
         assert!((m[0] - motion[start][0]).abs() < 1e-4);
+    }
+
+    #[test]
+    fn style_balance_evens_out_the_sampled_styles() {
+        let mut c = NetConfig::tiny();
+        c.styles = 4;
+        // Five long waltzes (style 3) against one short cha-cha (style 0), as in tang2018.
+        let long = vec![[0.1f32; P]; 400];
+        let short = vec![[0.1f32; P]; 100];
+        let music = vec![[0.0f32; M]; 400];
+        let mut dances: Vec<DanceInput> = vec![(&short[..], &music[..100], Some(0))];
+        dances.extend((0..5).map(|_| (&long[..], &music[..], Some(3))));
+        let norm = Normalizer::fit(&long, &music);
+        let mut corpus = Corpus::new(&dances, &norm, &c, 16);
+        let cha_cha_share = |corpus: &Corpus| {
+            let mut rng = Rng::new(7);
+            let batch = corpus.random_batch(&mut rng, 2000, 1.0);
+            let rows = batch.styles.chunks_exact(4).step_by(16);
+            rows.filter(|r| r[0] == 1.0).count() as f64 / 2000.0
+        };
+        // By frames: 100 of 2100 frames.
+        assert!((cha_cha_share(&corpus) - 100.0 / 2100.0).abs() < 0.02);
+        assert!((corpus.style_shares()[0].1 - 100.0 / 2100.0).abs() < 1e-9);
+        corpus.set_style_balance(1.0);
+        assert!((cha_cha_share(&corpus) - 0.5).abs() < 0.04);
+        assert!((corpus.style_shares()[0].1 - 0.5).abs() < 1e-9);
+        // Half-way: shares as the square roots of the styles' frames.
+        corpus.set_style_balance(0.5);
+        let expect = 10.0 / (10.0 + 2000f64.sqrt());
+        assert!((cha_cha_share(&corpus) - expect).abs() < 0.03);
+        // Style drop hides the style of about that fraction of sequences, whole sequences.
+        corpus.set_style_drop(0.25);
+        let mut rng = Rng::new(8);
+        let batch = corpus.random_batch(&mut rng, 2000, 1.0);
+        let hidden: Vec<bool> = batch
+            .styles
+            .chunks_exact(4 * 16)
+            .map(|seq| seq.iter().all(|&v| v == 0.0))
+            .collect();
+        let share = hidden.iter().filter(|&&h| h).count() as f64 / 2000.0;
+        assert!((share - 0.25).abs() < 0.03, "hidden {share}");
+        for seq in batch.styles.chunks_exact(4 * 16) {
+            let marked = seq.chunks_exact(4).filter(|r| r.contains(&1.0)).count();
+            assert!(marked == 0 || marked == 16);
+        }
     }
 }

@@ -27,6 +27,10 @@ pub struct EvalArgs {
     /// Only the table of the validation dances (no key poses, unseen songs or long runs).
     #[arg(long)]
     pub quick: bool,
+    /// Only the ground-truth rows of the validation table (the data's own figures, and what
+    /// the training retime makes of them); no dancer runs.
+    #[arg(long)]
+    pub ground_truth: bool,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -50,6 +54,16 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     );
     let gt = set.ground_truth();
     let mut rows = vec![set.score("ground truth", &gt)?];
+    // What `danced-train dancer --beat-retime` makes of the data: the cost of the retime in
+    // FID_k, and the beat it puts in.
+    for depth in [0.2, 0.3] {
+        let retimed = set.ground_truth_beat_retimed(depth);
+        rows.push(set.score(&format!("ground truth, beat-retimed {depth}"), &retimed)?);
+    }
+    if o.ground_truth {
+        print!("{}", crate::eval::table(&rows));
+        return Ok(());
+    }
     let mut styled = vec![("ground truth".to_string(), gt.clone())];
     let mut libraries = vec![(
         "retrieval",

@@ -67,6 +67,18 @@ pub struct TrainArgs {
     /// Build a network without a style input (the architecture before issue 21).
     #[arg(long)]
     pub no_style: bool,
+    /// Balance the styles in the sampled sequences: a style's share goes as its frames to the
+    /// power 1 − this (0: by frames, 25 waltzes to 4 cha-chas; 1: every style equally often).
+    #[arg(long, default_value_t = 0.0)]
+    pub style_balance: f64,
+    /// Retime every training dance within each beat before training (time runs at
+    /// 1 − depth·cos(beat phase), as the live beat accent does), so the network learns to slow
+    /// into the beat from its own beat input; 0 trains on the dances as captured.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_depth)]
+    pub beat_retime: f64,
+    /// Fraction of training sequences with the style input hidden.
+    #[arg(long, default_value_t = 0.0)]
+    pub style_drop: f64,
     /// Also train on every training dance played at these speeds with its song (varispeed,
     /// e.g. `0.8,1.25,1.5`: a dance of 87 BPM at 70, 109 and 130 BPM), comma-separated.
     #[arg(long, value_delimiter = ',', value_parser = parse_speed)]
@@ -86,6 +98,13 @@ fn parse_speed(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if (0.25..=4.0).contains(&v) => Ok(v),
         _ => Err(format!("{s:?}: a speed is a number in 0.25..=4")),
+    }
+}
+
+fn parse_depth(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..0.9).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: a retime depth is a number in 0..0.9")),
     }
 }
 
@@ -139,7 +158,12 @@ fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
 /// Runs `danced-train dancer`.
 pub fn train(args: &TrainArgs) -> Result<()> {
     let started_loading = Instant::now();
-    let dances = on_default_rig(load_dances(&args.data, args.jobs, &args.speeds)?);
+    let mut dances = on_default_rig(load_dances(&args.data, args.jobs, &args.speeds)?);
+    if args.beat_retime > 0.0 {
+        for d in dances.iter_mut().filter(|d| !d.validation) {
+            *d = d.beat_retimed(args.beat_retime);
+        }
+    }
     let mut train_pairs = pairs(&dances, false);
     let mirrored: Vec<MirroredDance> = if args.mirror {
         train_pairs
@@ -198,6 +222,21 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let mut corpus = Corpus::new(&train_pairs, &norm, &config, args.sequence);
     corpus.set_input_noise(args.input_noise);
     corpus.set_music_drop(args.music_drop);
+    corpus.set_style_drop(args.style_drop);
+    corpus.set_style_balance(args.style_balance);
+    if config.styles > 0 {
+        let shares: Vec<String> = corpus
+            .style_shares()
+            .iter()
+            .map(|(s, w)| {
+                let name = s
+                    .and_then(model::style::DanceStyle::from_index)
+                    .map_or("none", |s| s.name());
+                format!("{name} {:.0} %", 100.0 * w)
+            })
+            .collect();
+        eprintln!("style shares of sampled sequences: {}", shares.join(", "));
+    }
     let val_corpus = Corpus::new(&val_pairs, &norm, &config, args.sequence);
     if corpus.dances() == 0 {
         bail!(
@@ -277,6 +316,21 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     ) + if args.mirror { " --mirror" } else { "" }
         + if args.no_aux { " --no-aux" } else { "" }
         + if args.no_style { " --no-style" } else { "" }
+        + &if args.beat_retime > 0.0 {
+            format!(" --beat-retime {}", args.beat_retime)
+        } else {
+            String::new()
+        }
+        + &if args.style_balance > 0.0 {
+            format!(" --style-balance {}", args.style_balance)
+        } else {
+            String::new()
+        }
+        + &if args.style_drop > 0.0 {
+            format!(" --style-drop {}", args.style_drop)
+        } else {
+            String::new()
+        }
         + &if args.speeds.is_empty() {
             String::new()
         } else {
