@@ -70,6 +70,12 @@ fn train_writes_a_model_that_generate_and_bench_use() {
                 "16",
                 "--jobs",
                 "2",
+                "--beat-retime",
+                "0.2",
+                "--style-balance",
+                "0.5",
+                "--style-drop",
+                "0.1",
             ])
             .arg("--data")
             .arg(&data)
@@ -78,6 +84,17 @@ fn train_writes_a_model_that_generate_and_bench_use() {
     );
     assert!(stdout.contains("trained 3 steps"), "{stdout}");
     assert!(stderr.contains("seed clip: training dance"), "{stderr}");
+    // Balanced: the 25 waltzes no longer take 80 % of the sequences.
+    assert!(stderr.contains("style shares of sampled sequences: cha-cha"), "{stderr}");
+    let file = model::neural::file::NeuralModel::load(&model).unwrap();
+    assert!(file.training.data.contains("retimed within each beat"));
+    assert!(
+        file.training
+            .recipe
+            .ends_with("--beat-retime 0.2 --style-balance 0.5 --style-drop 0.1"),
+        "{}",
+        file.training.recipe
+    );
     // The model file drives generate (through the streaming sampler) and the bench.
     let out = dir.join("gen.bvh");
     let (stdout, _) = succeed(

@@ -293,14 +293,19 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     model.training.frames = corpus.frames();
     model.training.seed = args.seed;
     model.training.horizon_frames = daemon::horizon::data_horizon(model::tang2018::TANG_FPS);
+    let mut variants = String::new();
+    if args.mirror {
+        variants += ", with their mirror images";
+    }
+    if args.beat_retime > 0.0 {
+        variants += &format!(
+            ", retimed within each beat (pace 1 − {}·cos(beat phase))",
+            args.beat_retime
+        );
+    }
     model.training.data = format!(
-        "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig{}: {}",
+        "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig{variants}: {}",
         daemon::dataset::DATASET_VERSION,
-        if args.mirror {
-            ", with their mirror images"
-        } else {
-            ""
-        },
         train_names.join(" ")
     );
     let recipe = format!(
