@@ -179,8 +179,12 @@ fn network_only_switches_the_safety_nets_off_and_says_so() {
     };
     let shipped = String::from_utf8_lossy(&run(&[]).stdout).into_owned();
     assert!(shipped.contains("safety nets: held"), "{shipped}");
-    // The shipped setting retimes the frames on the beat.
-    assert!(!shipped.contains("beat-accented 0.0 %"), "{shipped}");
+    // The shipped setting locks planted feet; it retimes the frames on the beat only when asked
+    // (the shipped network learned its own accent).
+    assert!(!shipped.contains("foot-locked 0.0 %"), "{shipped}");
+    assert!(shipped.contains("beat-accented 0.0 %"), "{shipped}");
+    let accented = String::from_utf8_lossy(&run(&["--beat-accent", "0.15"]).stdout).into_owned();
+    assert!(!accented.contains("beat-accented 0.0 %"), "{accented}");
     let alone = run(&["--network-only"]);
     let text = String::from_utf8_lossy(&alone.stdout).into_owned();
     assert!(alone.status.success(), "{text}");

@@ -12,6 +12,11 @@ use model::neural::dancer::NeuralDancer;
 use model::rig::{JOINT_COUNT, Pose, Skeleton};
 use model::source::{Controls, MotionSource};
 
+/// Held by each allocation proof of this file: the counter's tallies are per kind of thread,
+/// not per test, so one proof's planted allocation would land in another's count when the
+/// test harness runs them at once.
+static ALLOCATION_PROOF: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Dances `seconds` of the demo song with the shipped model at `temperature`; returns the poses
 /// (25 fps) and the held (non-finite or exploding) frames.
 fn dance_to_demo(seconds: f64, temperature: f32, seed: u64) -> (Vec<Pose>, u64) {
@@ -106,8 +111,24 @@ fn temperature_and_seed_shape_the_samples() {
 }
 
 #[test]
+fn the_network_alone_moves_on_the_beat() {
+    // Every safety net off (the beat accent with them): the shipped network learned to slow
+    // into the beat from the beat phase it hears, on a song it never trained on. At T = 0,
+    // where it dances without a held frame (at T = 0.5 and above, alone, some seeds run off
+    // the data within the 40 s; the restart net is there for that).
+    let (alone, held) = dance_to_demo_with(40.0, 0.0, 1, |d| {
+        d.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY)
+    });
+    let (_, beats) = common::demo_music(40.0, 25.0);
+    let (on, off) = common::beat_align_on_and_off(&alone, &beats);
+    eprintln!("BeatAlign of the network alone on / off the beat: {on:.3} / {off:.3}, {held} held");
+    assert_eq!(held, 0);
+    assert!(on > off + 0.1, "on {on:.3} vs off {off:.3}");
+}
+
+#[test]
 fn beat_accent_puts_the_moves_on_the_beat() {
-    let (accented, _) = dance_to_demo(40.0, 0.5, 3);
+    let (accented, _) = dance_to_demo_with(40.0, 0.5, 3, |d| d.set_beat_accent(0.3));
     let (_, beats) = common::demo_music(40.0, 25.0);
     let (on, off) = common::beat_align_on_and_off(&accented, &beats);
     let (own, _) = dance_to_demo_with(40.0, 0.5, 3, |d| d.set_beat_accent(0.0));
@@ -117,7 +138,7 @@ fn beat_accent_puts_the_moves_on_the_beat() {
     );
     assert!(on > off + 0.1, "on {on:.3} vs off {off:.3}");
     assert!(
-        on > own_on + 0.05,
+        on > own_on + 0.03,
         "accented {on:.3} vs own timing {own_on:.3}"
     );
 }
@@ -153,6 +174,7 @@ fn stepping_the_dancer_does_not_allocate() {
     let look = dancer.lookahead_frames();
     let rotations = Pose::rest().local_rotations;
     let mut pose = Pose::rest();
+    let _alone = ALLOCATION_PROOF.lock().unwrap_or_else(|e| e.into_inner());
     let before = daemon::alloc_counter::callback_allocations();
     daemon::alloc_counter::in_callback(|| {
         for i in 0..music.len() - look {
@@ -198,6 +220,7 @@ fn switching_styles_with_their_own_seed_clips_does_not_allocate() {
     let (music, _) = common::demo_music(8.0, 25.0);
     let look = dancer.lookahead_frames();
     let mut pose = Pose::rest();
+    let _alone = ALLOCATION_PROOF.lock().unwrap_or_else(|e| e.into_inner());
     // The counter counts on this thread (the proof would be empty otherwise).
     let before = daemon::alloc_counter::callback_allocations();
     daemon::alloc_counter::in_callback(|| drop(std::hint::black_box(vec![0u8; 64])));

@@ -85,7 +85,10 @@ fn train_writes_a_model_that_generate_and_bench_use() {
     assert!(stdout.contains("trained 3 steps"), "{stdout}");
     assert!(stderr.contains("seed clip: training dance"), "{stderr}");
     // Balanced: the 25 waltzes no longer take 80 % of the sequences.
-    assert!(stderr.contains("style shares of sampled sequences: cha-cha"), "{stderr}");
+    assert!(
+        stderr.contains("style shares of sampled sequences: cha-cha"),
+        "{stderr}"
+    );
     let file = model::neural::file::NeuralModel::load(&model).unwrap();
     assert!(file.training.data.contains("retimed within each beat"));
     assert!(
