@@ -538,8 +538,8 @@ impl BuiltDance {
         let mut out = self.clone();
         out.motion.clear();
         model::motion::encode(&warped, &mut out.motion);
+        // The retimed motion is never longer than the music (`beat_retime_times` stops at it).
         out.music.truncate(out.motion.len());
-        out.motion.truncate(out.music.len());
         out
     }
 }

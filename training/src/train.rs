@@ -283,7 +283,8 @@ impl Corpus {
     pub fn random_batch(&self, rng: &mut Rng, sequences: usize, key_drop: f64) -> Batch {
         let mut batch = Batch::default();
         let (s, l) = (self.sequence, self.config.lookahead);
-        // Dances are drawn in proportion to their length, so every frame is equally likely.
+        // Dances are drawn in proportion to their length, so every frame is equally likely, or
+        // by the style-balanced weights when they are set.
         let total = self.frames();
         for _ in 0..sequences {
             let dance = match self.balanced.last() {

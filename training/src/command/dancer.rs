@@ -108,6 +108,15 @@ fn parse_depth(s: &str) -> Result<f64, String> {
     }
 }
 
+/// ` NAME VALUE` for the recipe when `value` is not the option's default of 0, else nothing.
+fn option_if_set(name: &str, value: f64) -> String {
+    if value > 0.0 {
+        format!(" {name} {value}")
+    } else {
+        String::new()
+    }
+}
+
 fn load_dances(data: &Path, jobs: usize, speeds: &[f64]) -> Result<Vec<BuiltDance>> {
     let built: Vec<BuiltDance> =
         daemon::dataset::build_all_at_speeds(data, jobs, speeds, |_, _| true, true)?
@@ -321,21 +330,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     ) + if args.mirror { " --mirror" } else { "" }
         + if args.no_aux { " --no-aux" } else { "" }
         + if args.no_style { " --no-style" } else { "" }
-        + &if args.beat_retime > 0.0 {
-            format!(" --beat-retime {}", args.beat_retime)
-        } else {
-            String::new()
-        }
-        + &if args.style_balance > 0.0 {
-            format!(" --style-balance {}", args.style_balance)
-        } else {
-            String::new()
-        }
-        + &if args.style_drop > 0.0 {
-            format!(" --style-drop {}", args.style_drop)
-        } else {
-            String::new()
-        }
+        + &option_if_set("--beat-retime", args.beat_retime)
+        + &option_if_set("--style-balance", args.style_balance)
+        + &option_if_set("--style-drop", args.style_drop)
         + &if args.speeds.is_empty() {
             String::new()
         } else {
