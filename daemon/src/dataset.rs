@@ -299,6 +299,8 @@ pub struct BuiltDance {
     pub fit_error_cm: f64,
     /// Rest height of the fitted rig's hips, metres (the dancer's size).
     pub hip_height_m: f32,
+    /// Quiet passages written into it (see [`crate::quiet_passage`]), frames `[start, end)`.
+    pub quiet: Vec<(usize, usize)>,
 }
 
 impl BuiltDance {
@@ -404,6 +406,20 @@ pub fn build_dance_at_speeds(
     validation: bool,
     speeds: &[f64],
 ) -> Result<Vec<BuiltDance>, String> {
+    build_dance_augmented(dance, data, validation, speeds, 0.0)
+}
+
+/// [`build_dance_at_speeds`] with about `quiet_per_minute` quiet passages a minute written into
+/// each built dance ([`crate::quiet_passage`]): its song turned down and darkened there before
+/// the streaming analysis hears it, its motion slowed to half time there; each dance's passages
+/// drawn from a seed of its name and speed.
+pub fn build_dance_augmented(
+    dance: &TangDance,
+    data: &Path,
+    validation: bool,
+    speeds: &[f64],
+    quiet_per_minute: f64,
+) -> Result<Vec<BuiltDance>, String> {
     let fit = fit_dance(dance).map_err(|e| e.to_string())?;
     let mut motion = Vec::new();
     model::motion::encode(&fit.poses, &mut motion);
@@ -416,6 +432,7 @@ pub fn build_dance_at_speeds(
         start_s: None,
         fit_error_cm: fit.mean_error_cm,
         hip_height_m: fit.skeleton.hip_height(),
+        quiet: Vec::new(),
     };
     let Some(audio) = &dance.audio else {
         return Ok(vec![built]);
@@ -457,9 +474,67 @@ pub fn build_dance_at_speeds(
         let from = keep_from.unwrap_or(b.motion.len());
         b.motion = b.motion[from..from + b.music.len()].to_vec();
         b.start_s = Some((first + from as i64) as f64 / TANG_FPS);
+        if quiet_per_minute > 0.0 {
+            add_quiet_passages(
+                &mut b,
+                audio,
+                speed,
+                quiet_per_minute,
+                (first + from as i64) as usize,
+            )?;
+        }
         out.push(b);
     }
     Ok(out)
+}
+
+/// Writes quiet passages into `b` (built from `audio` at `speed`, its frame 0 at the song's
+/// analysis frame `first`): plans them on the beat and bar the analysis heard, analyses the song
+/// again with the passages treated, and slows the motion there.
+fn add_quiet_passages(
+    b: &mut BuiltDance,
+    audio: &Path,
+    speed: f64,
+    per_minute: f64,
+    first: usize,
+) -> Result<(), String> {
+    use crate::quiet_passage::{QuietShaper, beat_positions, plan, warp_times};
+    let seed = b.name.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, c| {
+        (h ^ u64::from(c)).wrapping_mul(0x100_0000_01b3)
+    });
+    let mut rng = model::neural::rng::Rng::new(seed);
+    let beats_per_bar = if b.style == 'W' { 3 } else { 4 };
+    let passages = plan(&b.music, TANG_FPS, beats_per_bar, per_minute, &mut rng);
+    if passages.is_empty() {
+        return Ok(());
+    }
+    let beats = beat_positions(&b.music);
+    let mut shaper = QuietShaper::new(&passages, first as f64 / TANG_FPS, TANG_FPS);
+    let opts = AnalyzeOptions::native(Some(TANG_FPS));
+    let a = crate::offline::analyze_file_shaped(
+        audio,
+        opts,
+        speed,
+        &mut |samples, first_sample, rate, channels| {
+            shaper.process(samples, first_sample, rate, channels);
+        },
+        &mut |_, _| {},
+    )
+    .map_err(|e| e.to_string())?;
+    let heard = dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS));
+    let kept = heard.len().saturating_sub(first).min(b.music.len());
+    b.music = heard[first.min(heard.len())..][..kept].to_vec();
+    let times = warp_times(&beats[..kept], &passages);
+    let mut poses = Vec::new();
+    model::motion::decode(&b.motion, model::motion::RootState::ORIGIN, &mut poses);
+    let warped = warp_poses(&poses, &times);
+    b.motion.clear();
+    model::motion::encode(&warped, &mut b.motion);
+    b.quiet = passages
+        .iter()
+        .map(|p| (p.start_frame, p.end_frame))
+        .collect();
+    Ok(())
 }
 
 /// `poses` (at any fixed rate) played `speed` times as fast at the same rate: frame j shows
@@ -563,6 +638,19 @@ pub fn build_all_at_speeds(
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     bar: bool,
 ) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
+    build_all_augmented(data, jobs, speeds, 0.0, wanted, bar)
+}
+
+/// [`build_all_at_speeds`] with about `quiet_per_minute` quiet passages a minute in every
+/// training dance ([`build_dance_augmented`]; validation dances stay as they are).
+pub fn build_all_augmented(
+    data: &Path,
+    jobs: usize,
+    speeds: &[f64],
+    quiet_per_minute: f64,
+    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
+    bar: bool,
+) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
     use anyhow::Context;
     let dances = dances_with_split(data)
         .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
@@ -571,10 +659,18 @@ pub fn build_all_at_speeds(
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let built = build_dances_at_speeds(data, &dances, jobs, speeds, wanted, |name| {
-        pb.set_message(name.to_string());
-        pb.inc(1);
-    });
+    let built = build_dances_augmented(
+        data,
+        &dances,
+        jobs,
+        speeds,
+        quiet_per_minute,
+        wanted,
+        |name| {
+            pb.set_message(name.to_string());
+            pb.inc(1);
+        },
+    );
     pb.finish_and_clear();
     Ok(built)
 }
@@ -604,6 +700,20 @@ pub fn build_dances_at_speeds(
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     progress: impl Fn(&str) + Sync,
 ) -> Vec<(String, Result<BuiltDance, String>)> {
+    build_dances_augmented(data, dances, jobs, speeds, 0.0, wanted, progress)
+}
+
+/// [`build_dances_at_speeds`] with about `quiet_per_minute` quiet passages a minute in every
+/// training dance ([`build_dance_augmented`]).
+pub fn build_dances_augmented(
+    data: &Path,
+    dances: &[(PathBuf, String, bool)],
+    jobs: usize,
+    speeds: &[f64],
+    quiet_per_minute: f64,
+    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
+    progress: impl Fn(&str) + Sync,
+) -> Vec<(String, Result<BuiltDance, String>)> {
     let results = crate::pool::parallel_map(dances, jobs.max(1), |(dir, name, validation)| {
         let mut all = vec![1.0];
         if !*validation {
@@ -611,10 +721,18 @@ pub fn build_dances_at_speeds(
         }
         let r = match load_dance(dir) {
             Ok(d) if !wanted(&d, *validation) => None,
-            Ok(d) => Some(match build_dance_at_speeds(&d, data, *validation, &all) {
-                Ok(built) => built.into_iter().map(|b| (b.name.clone(), Ok(b))).collect(),
-                Err(e) => vec![(name.clone(), Err(e))],
-            }),
+            Ok(d) => Some(
+                match build_dance_augmented(
+                    &d,
+                    data,
+                    *validation,
+                    &all,
+                    if *validation { 0.0 } else { quiet_per_minute },
+                ) {
+                    Ok(built) => built.into_iter().map(|b| (b.name.clone(), Ok(b))).collect(),
+                    Err(e) => vec![(name.clone(), Err(e))],
+                },
+            ),
             Err(e) => Some(vec![(name.clone(), Err(e.to_string()))]),
         };
         progress(name);

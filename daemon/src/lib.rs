@@ -23,4 +23,5 @@ pub mod plot;
 pub mod pool;
 pub mod pose_bank;
 pub mod progress;
+pub mod quiet_passage;
 pub mod view;

@@ -197,6 +197,24 @@ pub fn analyze_file_at_speed(
     speed: f64,
     progress: &mut dyn FnMut(f64, Option<f64>),
 ) -> Result<FileAnalysis, AnalyzeError> {
+    analyze_file_shaped(path, options, speed, &mut |_, _, _, _| {}, progress)
+}
+
+/// Changes decoded samples on their way into the analysis: hears a block of interleaved
+/// samples, the index of its first sample frame, the sample rate and the channel count.
+pub type SampleShaper<'a> = dyn FnMut(&mut [f32], u64, u32, usize) + 'a;
+
+/// [`analyze_file_at_speed`] of the song reshaped on its way in: `shape` hears each decoded
+/// block (interleaved samples), the index of its first sample frame, the sample rate (the
+/// sped-up song's) and the channel count, and may change the samples (training data's quiet
+/// passages).
+pub fn analyze_file_shaped(
+    path: &Path,
+    options: AnalyzeOptions,
+    speed: f64,
+    shape: &mut SampleShaper<'_>,
+    progress: &mut dyn FnMut(f64, Option<f64>),
+) -> Result<FileAnalysis, AnalyzeError> {
     let decode_start = Instant::now();
     let mut reader = AudioFileReader::open(path)?;
     let open_time = decode_start.elapsed();
@@ -208,6 +226,7 @@ pub fn analyze_file_at_speed(
     let rate = (reader.sample_rate() as f64 * speed).round().max(1.0) as u32;
     let channels = reader.channels();
     let total_s = reader.total_frames().map(|f| f as f64 / rate as f64);
+    let mut decoded = 0u64;
     let mut result = stream(
         path.display().to_string(),
         rate,
@@ -215,7 +234,13 @@ pub fn analyze_file_at_speed(
         options,
         total_s,
         progress,
-        &mut |out| Ok(reader.read_block(out)?),
+        &mut |out| {
+            let n = reader.read_block(out)?;
+            let ch = usize::from(channels.max(1));
+            shape(&mut out[..n * ch], decoded, rate, ch);
+            decoded += n as u64;
+            Ok(n)
+        },
     )?;
     result.decode_time += open_time;
     result.skipped_packets = reader.skipped_packets();

@@ -63,3 +63,83 @@ fn a_dance_builds_into_aligned_finite_features() {
     std::fs::remove_file(&out).ok();
     std::fs::remove_file(out.with_extension("json")).ok();
 }
+
+/// Mean joint speed (m per frame) of each frame of `motion` against the one before (0 for the
+/// first).
+fn joint_speeds(motion: &[model::motion::MotionFeatures]) -> Vec<f32> {
+    let mut poses = Vec::new();
+    model::motion::decode(motion, model::motion::RootState::ORIGIN, &mut poses);
+    let n = model::rig::JOINT_COUNT;
+    let p = model::rig::Skeleton::default_adult().trajectory(&poses);
+    (0..poses.len())
+        .map(|i| {
+            if i == 0 {
+                return 0.0;
+            }
+            (0..n)
+                .map(|j| (p[i * n + j] - p[(i - 1) * n + j]).length())
+                .sum::<f32>()
+                / n as f32
+        })
+        .collect()
+}
+
+#[test]
+fn quiet_passages_turn_the_song_down_and_slow_the_dance_to_half_time() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    let dir = data.join("tang2018/DANCE_W_22");
+    if !dir.is_dir() {
+        eprintln!("skipping: {} not found", dir.display());
+        return;
+    }
+    let dance = model::tang2018::load_dance(&dir).unwrap();
+    let plain = build_dance(&dance, &data, false).unwrap();
+    let quiet = daemon::dataset::build_dance_augmented(&dance, &data, false, &[1.0], 2.0)
+        .unwrap()
+        .pop()
+        .unwrap();
+    assert_eq!(quiet.motion.len(), plain.motion.len());
+    assert_eq!(quiet.music.len(), plain.music.len());
+    assert!(plain.quiet.is_empty());
+    assert!(!quiet.quiet.is_empty(), "no passage planned");
+    let inside = |i: usize| quiet.quiet.iter().any(|&(a, b)| (a..b).contains(&i));
+    let first = quiet.quiet[0].0;
+    // Before the first passage, the dance is untouched (but for rounding: the motion went
+    // through poses and back).
+    let moved = quiet.motion[..first]
+        .iter()
+        .flatten()
+        .zip(plain.motion[..first].iter().flatten())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(moved < 1e-3, "moved {moved} before the first passage");
+    let energy = |d: &daemon::dataset::BuiltDance, keep: &dyn Fn(usize) -> bool| {
+        let v: Vec<f32> = (0..d.music.len())
+            .filter(|&i| keep(i))
+            .map(|i| d.music[i][FeatureLayout::ENERGY])
+            .collect();
+        v.iter().sum::<f32>() / v.len() as f32
+    };
+    let drop = energy(&plain, &inside) - energy(&quiet, &inside);
+    assert!((6.0..20.0).contains(&drop), "passages {drop:.1} dB quieter");
+    let far = |i: usize| quiet.quiet.iter().all(|&(a, b)| i + 25 < a || i > b + 50);
+    let elsewhere = energy(&plain, &far) - energy(&quiet, &far);
+    assert!(elsewhere.abs() < 0.3, "elsewhere {elsewhere:.2} dB quieter");
+    // Half time inside (the edges glide), the same speed elsewhere.
+    let (s_plain, s_quiet) = (joint_speeds(&plain.motion), joint_speeds(&quiet.motion));
+    let mean = |s: &[f32], keep: &dyn Fn(usize) -> bool| {
+        let v: Vec<f32> = (1..s.len()).filter(|&i| keep(i)).map(|i| s[i]).collect();
+        v.iter().sum::<f32>() / v.len() as f32
+    };
+    let ratio = mean(&s_quiet, &inside) / mean(&s_quiet, &|i| !inside(i));
+    let plain_ratio = mean(&s_plain, &inside) / mean(&s_plain, &|i| !inside(i));
+    eprintln!(
+        "{} passages: {drop:.1} dB quieter inside, {elsewhere:.2} dB elsewhere; joint speed inside / rest {ratio:.2} (as captured {plain_ratio:.2})",
+        quiet.quiet.len()
+    );
+    assert!(
+        ratio < 0.65 * plain_ratio,
+        "inside / rest {ratio:.2}, as captured {plain_ratio:.2}"
+    );
+    assert!(quiet.motion.iter().flatten().all(|v| v.is_finite()));
+}

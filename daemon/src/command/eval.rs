@@ -31,6 +31,10 @@ pub struct EvalArgs {
     /// the training retime makes of them); no dancer runs.
     #[arg(long)]
     pub ground_truth: bool,
+    /// Only the table of the songs in no training dance (beat by tempo band, quiet parts),
+    /// for the retrieval, shipped neural and network-only rows.
+    #[arg(long, conflicts_with_all = ["quick", "ground_truth"])]
+    pub music: bool,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -39,32 +43,19 @@ pub struct EvalArgs {
     pub jobs: usize,
 }
 
-/// Runs `danced eval`.
-pub fn eval(o: &EvalArgs) -> Result<()> {
-    const NO_ACCENT: &str = "neural, no beat accent";
-    const FRESH_NOISE: &str = "neural, independent noise";
-    const NO_FOOT_LOCK: &str = "neural, no foot lock";
-    const NETWORK_ONLY: &str = "neural, network only";
-    let started = Instant::now();
-    let set = crate::eval::EvalSet::load(&o.data, o.jobs)?;
-    eprintln!(
-        "validation dances: {} (loaded in {:.1} s)",
-        set.validation_names().join(" "),
-        started.elapsed().as_secs_f64()
-    );
-    let gt = set.ground_truth();
-    let mut rows = vec![set.score("ground truth", &gt)?];
-    // What `danced-train dancer --beat-retime` makes of the data: the cost of the retime in
-    // FID_k, and the beat it puts in.
-    for depth in [0.2, 0.3] {
-        let retimed = set.ground_truth_beat_retimed(depth);
-        rows.push(set.score(&format!("ground truth, beat-retimed {depth}"), &retimed)?);
-    }
-    if o.ground_truth {
-        print!("{}", crate::eval::table(&rows));
-        return Ok(());
-    }
-    let mut styled = vec![("ground truth".to_string(), gt.clone())];
+const NO_ACCENT: &str = "neural, no beat accent";
+const FRESH_NOISE: &str = "neural, independent noise";
+const NO_FOOT_LOCK: &str = "neural, no foot lock";
+const NETWORK_ONLY: &str = "neural, network only";
+
+/// Whether a row is one of the neural dancer's ablations (one net changed).
+fn ablation(name: &str) -> bool {
+    [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name)
+}
+
+/// The dancers scored: retrieval (and on the full library), the neural dancer as shipped, its
+/// ablations and the network alone.
+fn sources(o: &EvalArgs) -> Result<Vec<(String, Box<dyn MotionSource>)>> {
     let mut libraries = vec![(
         "retrieval",
         crate::dancer::load_library(o.library.as_deref())?.0,
@@ -75,7 +66,6 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
             crate::dancer::training_library(&o.data, o.jobs)?.0,
         ));
     }
-    let temperatures = [0.0f32, 0.5, 1.0];
     let mut sources: Vec<(String, Box<dyn MotionSource>)> = Vec::new();
     for (name, lib) in libraries {
         sources.push((name.to_string(), Box::new(crate::eval::retrieval(lib)?)));
@@ -99,7 +89,41 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     let mut alone = crate::dancer::neural_dancer(&model, o.seed)?;
     alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
     sources.push((NETWORK_ONLY.into(), Box::new(alone)));
-    let ablation = |name: &str| [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name);
+    Ok(sources)
+}
+
+/// Runs `danced eval`.
+pub fn eval(o: &EvalArgs) -> Result<()> {
+    let started = Instant::now();
+    let temperatures = [0.0f32, 0.5, 1.0];
+    if o.music {
+        let mut sources = sources(o)?;
+        sources.retain(|(n, _)| !ablation(n));
+        music_table(o, &mut sources, &temperatures)?;
+        eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+        return Ok(());
+    }
+    let set = crate::eval::EvalSet::load(&o.data, o.jobs)?;
+    eprintln!(
+        "validation dances: {} (loaded in {:.1} s)",
+        set.validation_names().join(" "),
+        started.elapsed().as_secs_f64()
+    );
+    let gt = set.ground_truth();
+    let mut rows = vec![set.score("ground truth", &gt)?];
+    // What `danced-train dancer --beat-retime` makes of the data: the cost of the retime in
+    // FID_k, and the beat it puts in.
+    for depth in [0.2, 0.3] {
+        let retimed = set.ground_truth_beat_retimed(depth);
+        rows.push(set.score(&format!("ground truth, beat-retimed {depth}"), &retimed)?);
+    }
+    if o.ground_truth {
+        print!("{}", crate::eval::table(&rows));
+        return Ok(());
+    }
+    let mut styled = vec![("ground truth".to_string(), gt.clone())];
+    let model = crate::dancer::load_model(o.model.as_deref())?;
+    let mut sources = sources(o)?;
     for (name, dancer) in sources.iter_mut() {
         for t in temperatures {
             let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);
@@ -217,12 +241,23 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
             );
         }
     }
-    // Songs in no training dance, with exact beats: the music-side metrics only.
+    music_table(o, &mut sources, &temperatures)?;
+    eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// Songs in no training dance, with exact beats: the music-side metrics only (skipped, with a
+/// word on stderr, when the songs are missing).
+fn music_table(
+    o: &EvalArgs,
+    sources: &mut [(String, Box<dyn MotionSource>)],
+    temperatures: &[f32],
+) -> Result<()> {
     match crate::eval::MusicSet::load(&o.data) {
         Ok(music) => {
             let mut music_rows = Vec::new();
             for (name, dancer) in sources.iter_mut().filter(|(n, _)| !n.contains("full")) {
-                for t in temperatures {
+                for &t in temperatures {
                     music_rows.push(music.score(
                         &format!("{name} T={t}"),
                         dancer.as_mut(),
@@ -239,6 +274,5 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         }
         Err(e) => eprintln!("synth-beats skipped: {e:#}"),
     }
-    eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
     Ok(())
 }

@@ -76,6 +76,12 @@ pub struct TrainArgs {
     /// into the beat from its own beat input; 0 trains on the dances as captured.
     #[arg(long, default_value_t = 0.0, value_parser = parse_depth)]
     pub beat_retime: f64,
+    /// Write about this many quiet passages a minute into every training dance: 2 or 4 bars
+    /// of its song turned down 6–14 dB and low-passed (before the streaming analysis hears
+    /// it), the motion slowed to half time there (tang2018 has no breakdowns to learn calm
+    /// from); 0 trains on the songs as they are.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_quiet)]
+    pub quiet_passages: f64,
     /// Fraction of training sequences with the style input hidden.
     #[arg(long, default_value_t = 0.0)]
     pub style_drop: f64,
@@ -101,6 +107,15 @@ fn parse_speed(s: &str) -> Result<f64, String> {
     }
 }
 
+fn parse_quiet(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..=4.0).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "{s:?}: quiet passages a minute is a number in 0..=4"
+        )),
+    }
+}
+
 fn parse_depth(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if (0.0..0.9).contains(&v) => Ok(v),
@@ -117,13 +132,24 @@ fn option_if_set(name: &str, value: f64) -> String {
     }
 }
 
-fn load_dances(data: &Path, jobs: usize, speeds: &[f64]) -> Result<Vec<BuiltDance>> {
-    let built: Vec<BuiltDance> =
-        daemon::dataset::build_all_at_speeds(data, jobs, speeds, |_, _| true, true)?
-            .into_iter()
-            .filter_map(|(_, r)| r.ok())
-            .filter(|d| !d.music.is_empty())
-            .collect();
+fn load_dances(
+    data: &Path,
+    jobs: usize,
+    speeds: &[f64],
+    quiet_per_minute: f64,
+) -> Result<Vec<BuiltDance>> {
+    let built: Vec<BuiltDance> = daemon::dataset::build_all_augmented(
+        data,
+        jobs,
+        speeds,
+        quiet_per_minute,
+        |_, _| true,
+        true,
+    )?
+    .into_iter()
+    .filter_map(|(_, r)| r.ok())
+    .filter(|d| !d.music.is_empty())
+    .collect();
     if built.is_empty() {
         bail!("no dance with music could be built from {}", data.display());
     }
@@ -157,6 +183,46 @@ fn on_default_rig(mut dances: Vec<BuiltDance>) -> Vec<BuiltDance> {
     dances
 }
 
+/// Prints how much of the training data the quiet passages cover and what they changed: the
+/// energy heard and the joint speed inside them against the rest of their dances.
+fn report_quiet_passages(dances: &[BuiltDance]) {
+    use dsp::feature::FeatureLayout;
+    let (mut passages, mut quiet_frames, mut frames) = (0, 0, 0);
+    let mut energy = [0.0f64; 2];
+    let mut speed = [0.0f64; 2];
+    let mut counts = [0usize; 2];
+    let skeleton = model::rig::Skeleton::default_adult();
+    for d in dances.iter().filter(|d| !d.validation) {
+        frames += d.motion.len();
+        if d.quiet.is_empty() {
+            continue;
+        }
+        passages += d.quiet.len();
+        let mut poses = Vec::new();
+        model::motion::decode(&d.motion, model::motion::RootState::ORIGIN, &mut poses);
+        let joints = model::rig::JOINT_COUNT;
+        let positions = skeleton.trajectory(&poses);
+        for i in 1..d.music.len().min(poses.len()) {
+            let inside = usize::from(d.quiet.iter().any(|&(a, b)| (a..b).contains(&i)));
+            quiet_frames += inside;
+            energy[inside] += f64::from(d.music[i][FeatureLayout::ENERGY]);
+            let step: f32 = (0..joints)
+                .map(|j| (positions[i * joints + j] - positions[(i - 1) * joints + j]).length())
+                .sum();
+            speed[inside] += f64::from(step) / joints as f64;
+            counts[inside] += 1;
+        }
+    }
+    let mean = |v: [f64; 2], k: usize| v[k] / counts[k].max(1) as f64;
+    eprintln!(
+        "quiet passages: {passages} over {:.1} % of {frames} training frames; energy heard {:.1} dB inside, {:.1} dB in the rest of their dances; joint speed inside / rest {:.2}",
+        100.0 * quiet_frames as f64 / frames.max(1) as f64,
+        mean(energy, 1),
+        mean(energy, 0),
+        mean(speed, 1) / mean(speed, 0).max(1e-9)
+    );
+}
+
 /// Warm-up, then cosine decay to a tenth of the peak over the time budget.
 fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
     let warm = ((step + 1) as f64 / 200.0).min(1.0);
@@ -167,11 +233,19 @@ fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
 /// Runs `danced-train dancer`.
 pub fn train(args: &TrainArgs) -> Result<()> {
     let started_loading = Instant::now();
-    let mut dances = on_default_rig(load_dances(&args.data, args.jobs, &args.speeds)?);
+    let mut dances = on_default_rig(load_dances(
+        &args.data,
+        args.jobs,
+        &args.speeds,
+        args.quiet_passages,
+    )?);
     if args.beat_retime > 0.0 {
         for d in dances.iter_mut().filter(|d| !d.validation) {
             *d = d.beat_retimed(args.beat_retime);
         }
+    }
+    if args.quiet_passages > 0.0 {
+        report_quiet_passages(&dances);
     }
     let mut train_pairs = pairs(&dances, false);
     let mirrored: Vec<MirroredDance> = if args.mirror {
@@ -312,6 +386,12 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             args.beat_retime
         );
     }
+    if args.quiet_passages > 0.0 {
+        variants += &format!(
+            ", with about {} quiet passages a minute (2 or 4 bars of the song 6–14 dB down and low-passed, the motion at half time there)",
+            args.quiet_passages
+        );
+    }
     model.training.data = format!(
         "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig{variants}: {}",
         daemon::dataset::DATASET_VERSION,
@@ -333,6 +413,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--beat-retime", args.beat_retime)
         + &option_if_set("--style-balance", args.style_balance)
         + &option_if_set("--style-drop", args.style_drop)
+        + &option_if_set("--quiet-passages", args.quiet_passages)
         + &if args.speeds.is_empty() {
             String::new()
         } else {
