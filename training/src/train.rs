@@ -21,6 +21,19 @@ pub const KEY_HORIZON_MIN: usize = 12;
 /// Longest key-pose horizon drawn in training, frames (4 s).
 pub const KEY_HORIZON_MAX: usize = 100;
 
+/// Longest glide of a spliced key pose into the dance, frames (2 s): the glide starts when the
+/// pose is announced or this long before it is due, whichever is later, so it depends only on
+/// what the network sees (the announcement, within its 64-frame window, or the frames to go).
+pub const KEY_SPLICE_GLIDE: usize = 50;
+/// Frames over which a spliced key pose's offset fades after the pose is reached (1 s).
+pub const KEY_SPLICE_RELEASE: usize = 25;
+
+/// 3x² − 2x³ of `x` clamped to [0, 1].
+fn smoothstep(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
 /// Standard deviation of the Gaussian noise added to training targets (normalised units):
 /// some features are (nearly) constant in the data, and a flow fitted to a degenerate
 /// dimension drives its density to infinity; the noise bounds it (validation is noise-free).
@@ -60,6 +73,7 @@ pub struct Corpus {
     input_noise: f32,
     music_drop: f64,
     style_drop: f64,
+    key_splice: f64,
     /// Cumulative sampling weight of each dance when styles are balanced (empty: every frame
     /// equally likely).
     balanced: Vec<f64>,
@@ -125,8 +139,20 @@ impl Corpus {
             input_noise: INPUT_NOISE,
             music_drop: 0.0,
             style_drop: 0.0,
+            key_splice: 0.0,
             balanced: Vec::new(),
         }
+    }
+
+    /// Sets the fraction of key-pose sequences whose key pose is spliced in: a pose from
+    /// anywhere in the corpus replaces the dance's own, and the dance glides onto it (joint
+    /// rotations offset by a smoothstep from the announcement, or [`KEY_SPLICE_GLIDE`] frames
+    /// before it is due, to the key frame, and released over [`KEY_SPLICE_RELEASE`] frames).
+    /// The data's own future pose is what the past already predicts, so a network trained on
+    /// it alone has no reason to read the key input; a spliced one can be reached only by
+    /// reading it.
+    pub fn set_key_splice(&mut self, p: f64) {
+        self.key_splice = p.clamp(0.0, 1.0);
     }
 
     /// Sets the fraction of training sequences whose style input is hidden (all zeros), so
@@ -210,13 +236,15 @@ impl Corpus {
     }
 
     /// Appends the sequence of `dance` starting at frame `start`; `key` is (token at which the
-    /// key pose is set, its frame), if any.
+    /// key pose is set, its frame), if any; `donor` the (dance, frame) whose pose is spliced in
+    /// as the key pose (see [`Corpus::set_key_splice`]).
     fn push_sequence(
         &self,
         batch: &mut Batch,
         dance: usize,
         start: usize,
         key: Option<(usize, usize)>,
+        donor: Option<(usize, usize)>,
         mut noise: Option<&mut Rng>,
     ) {
         let no_music = match noise.as_mut() {
@@ -234,9 +262,46 @@ impl Corpus {
         let mut tok = vec![0.0; TOKEN_DIM];
         let width = style_width(&self.config);
         batch.futures.resize(AUX_HORIZONS.len(), Vec::new());
+        // A spliced key pose: its rotations, their offset from the dance's own at the key
+        // frame, and the glide's start.
+        let splice = key.zip(donor).map(|((at, kf), (dd, df))| {
+            let own = &d.motion[kf * P + ROTATIONS..kf * P + ROTATIONS + KEY_ROT_DIM];
+            let pose =
+                &self.dances[dd].motion[df * P + ROTATIONS..df * P + ROTATIONS + KEY_ROT_DIM];
+            let offset: Vec<f32> = pose.iter().zip(own).map(|(a, b)| a - b).collect();
+            let glide_from = (start + at).max(kf.saturating_sub(KEY_SPLICE_GLIDE));
+            (pose, offset, glide_from, kf)
+        });
+        let weight = |f: usize| -> f32 {
+            match &splice {
+                Some((_, _, from, kf)) if f <= *kf => {
+                    smoothstep((f as f32 - *from as f32 + 1.0) / (*kf - *from + 1) as f32)
+                }
+                Some((_, _, _, kf)) => {
+                    1.0 - smoothstep((f - kf) as f32 / KEY_SPLICE_RELEASE as f32)
+                }
+                None => 0.0,
+            }
+        };
+        // Frame `f` of the dance, the spliced pose glided in.
+        let spliced = |f: usize| -> Vec<f32> {
+            let mut frame = d.motion[f * P..(f + 1) * P].to_vec();
+            if let Some((_, offset, _, _)) = &splice {
+                let w = weight(f);
+                if w > 0.0 {
+                    for (v, o) in frame[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
+                        .iter_mut()
+                        .zip(offset)
+                    {
+                        *v += w * o;
+                    }
+                }
+            }
+            frame
+        };
         for t in 0..s {
             let f = start + t;
-            let pose = &d.motion[(f - 1) * P..f * P];
+            let pose = &spliced(f - 1)[..];
             let music = if no_music {
                 &ZERO_MUSIC[..]
             } else {
@@ -245,7 +310,10 @@ impl Corpus {
             let k = key.and_then(|(at, kf)| {
                 (t >= at && f <= kf).then(|| {
                     (
-                        &d.motion[kf * P + ROTATIONS..kf * P + ROTATIONS + KEY_ROT_DIM],
+                        match &splice {
+                            Some((pose, ..)) => *pose,
+                            None => &d.motion[kf * P + ROTATIONS..kf * P + ROTATIONS + KEY_ROT_DIM],
+                        },
                         (kf - f) as u32,
                     )
                 })
@@ -257,9 +325,7 @@ impl Corpus {
                 }
             }
             batch.tokens.extend_from_slice(&tok);
-            batch
-                .targets
-                .extend_from_slice(&d.motion[f * P..(f + 1) * P]);
+            batch.targets.extend_from_slice(&spliced(f));
             if let Some(rng) = noise.as_mut() {
                 let n = batch.targets.len();
                 for v in &mut batch.targets[n - P..] {
@@ -273,7 +339,7 @@ impl Corpus {
             }
             for (h, future) in AUX_HORIZONS.iter().zip(batch.futures.iter_mut()) {
                 let g = (f + h).min(d.frames - 1);
-                future.extend_from_slice(&d.motion[g * P..(g + 1) * P]);
+                future.extend_from_slice(&spliced(g));
             }
         }
         batch.sequences += 1;
@@ -311,7 +377,20 @@ impl Corpus {
                 let horizon = KEY_HORIZON_MIN + rng.below(KEY_HORIZON_MAX - KEY_HORIZON_MIN + 1);
                 (at, (start + at + horizon).min(n - 1))
             });
-            self.push_sequence(&mut batch, dance, start, key, Some(rng));
+            // Drawn only when asked for, so runs without splicing keep their random stream.
+            let donor = match key {
+                Some(_) if self.key_splice > 0.0 && rng.uniform() < self.key_splice => {
+                    let mut pick = rng.below(total);
+                    let mut dd = 0;
+                    while pick >= self.dances[dd].frames {
+                        pick -= self.dances[dd].frames;
+                        dd += 1;
+                    }
+                    Some((dd, pick))
+                }
+                _ => None,
+            };
+            self.push_sequence(&mut batch, dance, start, key, donor, Some(rng));
         }
         batch
     }
@@ -386,7 +465,7 @@ impl Corpus {
         for (i, d) in self.dances.iter().enumerate() {
             let mut start = 1;
             while start + s + l <= d.frames {
-                self.push_sequence(&mut batch, i, start, None, None);
+                self.push_sequence(&mut batch, i, start, None, None, None);
                 if batch.sequences == 16 {
                     out.push(std::mem::take(&mut batch));
                 }
@@ -564,6 +643,77 @@ mod tests {
         }
         let after = tr.evaluate(&val).unwrap();
         assert!(after < before - 20.0, "NLL {before} → {after}");
+    }
+
+    #[test]
+    fn a_spliced_key_pose_is_reached_on_its_frame_and_announced_as_the_key() {
+        let c = NetConfig::tiny();
+        let frames = 200;
+        let dance = |phase: f32| -> Vec<[f32; P]> {
+            (0..frames)
+                .map(|i| {
+                    let mut m = [0.0f32; P];
+                    for (j, v) in m.iter_mut().enumerate() {
+                        *v = (phase + i as f32 * 0.05 + j as f32 * 0.3).sin();
+                    }
+                    m
+                })
+                .collect()
+        };
+        let (a, b) = (dance(0.0), dance(2.0));
+        let music = vec![[0.0f32; M]; frames];
+        let norm = Normalizer::fit(&a, &music);
+        let corpus = Corpus::new(
+            &[(&a[..], &music[..], None), (&b[..], &music[..], None)],
+            &norm,
+            &c,
+            120,
+        );
+        let (start, at, kf, donor) = (1, 10, 81, (1, 150));
+        let mut plain = Batch::default();
+        corpus.push_sequence(&mut plain, 0, start, Some((at, kf)), None, None);
+        let mut spliced = Batch::default();
+        corpus.push_sequence(&mut spliced, 0, start, Some((at, kf)), Some(donor), None);
+        let rotations = ROTATIONS..ROTATIONS + KEY_ROT_DIM;
+        let target = |batch: &Batch, f: usize| batch.targets[(f - start) * P..][..P].to_vec();
+        let token =
+            |batch: &Batch, f: usize| batch.tokens[(f - start) * TOKEN_DIM..][..TOKEN_DIM].to_vec();
+        let own = &corpus.dances[0].motion;
+        let key = &corpus.dances[1].motion[donor.1 * P..][..P];
+        // Untouched until the glide starts (announced at frame 11, due at 81: 50 frames ahead).
+        for f in start..kf - KEY_SPLICE_GLIDE {
+            assert_eq!(target(&spliced, f), target(&plain, f), "frame {f}");
+        }
+        // On the key frame the rotations are the key pose's; the root is the dance's own.
+        let on = target(&spliced, kf);
+        for i in rotations.clone() {
+            assert!(
+                (on[i] - key[i]).abs() < 1e-5,
+                "value {i}: {} against {}",
+                on[i],
+                key[i]
+            );
+        }
+        assert_eq!(on[..ROTATIONS], own[kf * P..kf * P + ROTATIONS]);
+        // Half-way through the glide, half-way there (smoothstep(½) = ½).
+        let mid = kf - KEY_SPLICE_GLIDE / 2;
+        let (m, p) = (target(&spliced, mid), target(&plain, mid));
+        let i = ROTATIONS + 7;
+        let expect = p[i] + 0.5 * (key[i] - own[kf * P + i]);
+        assert!((m[i] - expect).abs() < 0.03 * (key[i] - own[kf * P + i]).abs() + 1e-4);
+        // The previous pose a token carries is the spliced target before it.
+        assert_eq!(token(&spliced, kf)[..P], target(&spliced, kf - 1)[..]);
+        // The key input is the spliced pose, from its announcement on.
+        let k = token(&spliced, start + at);
+        assert_eq!(
+            k[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM],
+            key[rotations.clone()]
+        );
+        assert_eq!(token(&spliced, start + at - 1)[token::FLAG_AT], 0.0);
+        // Released a second after the key frame.
+        let after = kf + KEY_SPLICE_RELEASE;
+        assert_eq!(target(&spliced, after), target(&plain, after));
+        assert_ne!(target(&spliced, kf + 5), target(&plain, kf + 5));
     }
 
     #[test]

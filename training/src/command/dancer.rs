@@ -60,6 +60,12 @@ pub struct TrainArgs {
     /// Fraction of sequences trained without a key pose.
     #[arg(long, default_value_t = 0.3)]
     pub key_drop: f64,
+    /// Fraction of key-pose sequences whose key pose is spliced in from anywhere in the
+    /// training data, the dance gliding onto it (so the key input carries what the past
+    /// cannot: without splicing the key pose is the dance's own future, which the past already
+    /// predicts).
+    #[arg(long, default_value_t = 0.0)]
+    pub key_splice: f64,
     /// Train the next-pose likelihood alone, without the auxiliary future-pose heads (the
     /// recipe before issue 21).
     #[arg(long)]
@@ -307,6 +313,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     corpus.set_music_drop(args.music_drop);
     corpus.set_style_drop(args.style_drop);
     corpus.set_style_balance(args.style_balance);
+    corpus.set_key_splice(args.key_splice);
     if config.styles > 0 {
         let shares: Vec<String> = corpus
             .style_shares()
@@ -392,6 +399,12 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             args.quiet_passages
         );
     }
+    if args.key_splice > 0.0 {
+        variants += &format!(
+            ", {} of the key-pose sequences with a key pose spliced in from elsewhere in the data (the dance gliding onto it)",
+            args.key_splice
+        );
+    }
     model.training.data = format!(
         "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig{variants}: {}",
         daemon::dataset::DATASET_VERSION,
@@ -414,6 +427,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--style-balance", args.style_balance)
         + &option_if_set("--style-drop", args.style_drop)
         + &option_if_set("--quiet-passages", args.quiet_passages)
+        + &option_if_set("--key-splice", args.key_splice)
         + &if args.speeds.is_empty() {
             String::new()
         } else {
