@@ -391,7 +391,7 @@ pub fn is_validation(name: &str, all_names: &[String]) -> bool {
 /// `crate::horizon`), frame i of the motion paired with the music frame at song time
 /// `start + i / 25`. Frames outside the song are dropped.
 pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<BuiltDance, String> {
-    build_dance_at_speeds(dance, data, validation, &[1.0])?
+    build_dance_augmented(dance, data, validation, &[1.0], 0.0)?
         .pop()
         .ok_or_else(|| format!("{}: nothing built", dance.name))
 }
@@ -400,19 +400,10 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
 /// as fast together (the song varispeed, its features from the streaming analysis of the
 /// sped-up audio; the poses interpolated), so a dance of 87 BPM also teaches 70 and 130 BPM.
 /// A sped-up dance is named `NAME@SPEED` (its style letter stays). The rig is fitted once.
-pub fn build_dance_at_speeds(
-    dance: &TangDance,
-    data: &Path,
-    validation: bool,
-    speeds: &[f64],
-) -> Result<Vec<BuiltDance>, String> {
-    build_dance_augmented(dance, data, validation, speeds, 0.0)
-}
-
-/// [`build_dance_at_speeds`] with about `quiet_per_minute` quiet passages a minute written into
-/// each built dance ([`crate::quiet_passage`]): its song turned down and darkened there before
-/// the streaming analysis hears it, its motion slowed to half time there; each dance's passages
-/// drawn from a seed of its name and speed.
+/// With `quiet_per_minute` > 0, about that many quiet passages a minute are written into each
+/// built dance ([`crate::quiet_passage`]): its song turned down and darkened there before the
+/// streaming analysis hears it, its motion slowed to half time there; each dance's passages
+/// drawn from a seed of its name (speed included).
 pub fn build_dance_augmented(
     dance: &TangDance,
     data: &Path,
@@ -504,11 +495,18 @@ fn add_quiet_passages(
     });
     let mut rng = model::neural::rng::Rng::new(seed);
     let beats_per_bar = if b.style == 'W' { 3 } else { 4 };
-    let passages = plan(&b.music, TANG_FPS, beats_per_bar, per_minute, &mut rng);
+    let beats = beat_positions(&b.music);
+    let passages = plan(
+        &b.music,
+        &beats,
+        TANG_FPS,
+        beats_per_bar,
+        per_minute,
+        &mut rng,
+    );
     if passages.is_empty() {
         return Ok(());
     }
-    let beats = beat_positions(&b.music);
     let mut shaper = QuietShaper::new(&passages, first as f64 / TANG_FPS, TANG_FPS);
     let opts = AnalyzeOptions::native(Some(TANG_FPS));
     let a = crate::offline::analyze_file_shaped(
@@ -627,22 +625,12 @@ pub fn build_all(
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     bar: bool,
 ) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
-    build_all_at_speeds(data, jobs, &[1.0], wanted, bar)
+    build_all_augmented(data, jobs, &[1.0], 0.0, wanted, bar)
 }
 
-/// [`build_all`], every training dance also at each of `speeds` ([`build_dances_at_speeds`]).
-pub fn build_all_at_speeds(
-    data: &Path,
-    jobs: usize,
-    speeds: &[f64],
-    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
-    bar: bool,
-) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
-    build_all_augmented(data, jobs, speeds, 0.0, wanted, bar)
-}
-
-/// [`build_all_at_speeds`] with about `quiet_per_minute` quiet passages a minute in every
-/// training dance ([`build_dance_augmented`]; validation dances stay as they are).
+/// [`build_all`], every training dance also at each of `speeds` and with about
+/// `quiet_per_minute` quiet passages a minute ([`build_dances_augmented`]; validation dances
+/// stay as they are).
 pub fn build_all_augmented(
     data: &Path,
     jobs: usize,
@@ -686,25 +674,12 @@ pub fn build_dances(
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     progress: impl Fn(&str) + Sync,
 ) -> Vec<(String, Result<BuiltDance, String>)> {
-    build_dances_at_speeds(data, dances, jobs, &[1.0], wanted, progress)
+    build_dances_augmented(data, dances, jobs, &[1.0], 0.0, wanted, progress)
 }
 
-/// [`build_dances`] with every training dance also built at each of `speeds` (see
-/// [`build_dance_at_speeds`]; validation dances are built as they are): one entry per dance
-/// and speed, the dance itself first.
-pub fn build_dances_at_speeds(
-    data: &Path,
-    dances: &[(PathBuf, String, bool)],
-    jobs: usize,
-    speeds: &[f64],
-    wanted: impl Fn(&TangDance, bool) -> bool + Sync,
-    progress: impl Fn(&str) + Sync,
-) -> Vec<(String, Result<BuiltDance, String>)> {
-    build_dances_augmented(data, dances, jobs, speeds, 0.0, wanted, progress)
-}
-
-/// [`build_dances_at_speeds`] with about `quiet_per_minute` quiet passages a minute in every
-/// training dance ([`build_dance_augmented`]).
+/// [`build_dances`] with every training dance also built at each of `speeds` and with about
+/// `quiet_per_minute` quiet passages a minute (see [`build_dance_augmented`]; validation dances
+/// are built as they are): one entry per dance and speed, the dance itself first.
 pub fn build_dances_augmented(
     data: &Path,
     dances: &[(PathBuf, String, bool)],

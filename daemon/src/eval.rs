@@ -608,8 +608,9 @@ pub struct MusicRow {
     pub songs: usize,
 }
 
-/// Mean joint speed (m/s) in frames inside `spans` and outside them, skipping the first 2 s.
-fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64, f64) {
+/// Mean joint speed (m/s) of a joint `track` at 25 fps (as [`Skeleton::trajectory`] lays it
+/// out) in frames inside `spans` (seconds) and outside them, skipping the first 2 s.
+pub fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64, f64) {
     let fps = TANG_FPS;
     let frames = track.len() / JOINT_COUNT;
     let (mut inside, mut outside) = ((0.0, 0usize), (0.0, 0usize));

@@ -8,7 +8,7 @@
 //! half pace there and falls behind its song by exactly half the passage's bars, so after it
 //! the dance is on the beat and on the bar again (one bar of every two is left out).
 
-use dsp::feature::{FEATURE_DIM, FeatureLayout};
+use dsp::feature::{FEATURE_DIM, FeatureLayout, phase_of};
 use model::neural::rng::Rng;
 
 /// Frames over which the pace glides into and out of half time, in beats.
@@ -42,23 +42,11 @@ pub struct QuietPassage {
 /// Each frame's position in beats from the first frame, from the beat phase the analysis
 /// delivers (never going back: a phase that steps back holds the position).
 pub fn beat_positions(music: &[[f32; FEATURE_DIM]]) -> Vec<f64> {
-    unwrap_phase(music, FeatureLayout::BEAT_SIN, FeatureLayout::BEAT_COS)
-}
-
-fn unwrap_phase(music: &[[f32; FEATURE_DIM]], sin: usize, cos: usize) -> Vec<f64> {
-    let fraction = |m: &[f32; FEATURE_DIM]| {
-        let f = f64::from(m[sin]).atan2(f64::from(m[cos])) / std::f64::consts::TAU;
-        if f.is_finite() {
-            f.rem_euclid(1.0)
-        } else {
-            0.0
-        }
-    };
     let mut out = Vec::with_capacity(music.len());
     let mut position = 0.0;
-    let mut last = music.first().map_or(0.0, fraction);
+    let mut last = music.first().map_or(0.0, beat_phase);
     for m in music {
-        let f = fraction(m);
+        let f = beat_phase(m);
         let step = (f - last + 0.5).rem_euclid(1.0) - 0.5;
         position += step.max(0.0);
         last = f;
@@ -67,35 +55,35 @@ fn unwrap_phase(music: &[[f32; FEATURE_DIM]], sin: usize, cos: usize) -> Vec<f64
     out
 }
 
+fn beat_phase(m: &[f32; FEATURE_DIM]) -> f64 {
+    f64::from(phase_of(m[FeatureLayout::BEAT_SIN], m[FeatureLayout::BEAT_COS]).unwrap_or(0.0))
+}
+
+fn bar_phase(m: &[f32; FEATURE_DIM]) -> f32 {
+    phase_of(m[FeatureLayout::BAR_SIN], m[FeatureLayout::BAR_COS]).unwrap_or(0.0)
+}
+
 /// Frames where a bar starts: the bar phase wraps (from its last quarter to its first).
 fn bar_starts(music: &[[f32; FEATURE_DIM]]) -> Vec<usize> {
-    let fraction = |m: &[f32; FEATURE_DIM]| {
-        let f = f64::from(m[FeatureLayout::BAR_SIN]).atan2(f64::from(m[FeatureLayout::BAR_COS]))
-            / std::f64::consts::TAU;
-        if f.is_finite() {
-            f.rem_euclid(1.0)
-        } else {
-            0.0
-        }
-    };
     (1..music.len())
-        .filter(|&i| fraction(&music[i - 1]) > 0.75 && fraction(&music[i]) < 0.25)
+        .filter(|&i| bar_phase(&music[i - 1]) > 0.75 && bar_phase(&music[i]) < 0.25)
         .collect()
 }
 
 /// Chooses about `per_minute` quiet passages a minute for a dance whose music (the features as
-/// heard, frame for frame, at `rate` frames a second) has `beats_per_bar` beats to the bar:
+/// heard, frame for frame, at `rate` frames a second, its [`beat_positions`] in `beats`) has
+/// `beats_per_bar` beats to the bar:
 /// each of 2 or 4 bars (2 when 4 would outlast [`LONGEST_S`]) from a bar's start, where the beat
 /// runs steadily, at least [`GAP_S`] apart and from the end. May be the dance's first bar (a
 /// quiet intro).
 pub fn plan(
     music: &[[f32; FEATURE_DIM]],
+    beats: &[f64],
     rate: f64,
     beats_per_bar: usize,
     per_minute: f64,
     rng: &mut Rng,
 ) -> Vec<QuietPassage> {
-    let beats = beat_positions(music);
     let starts = bar_starts(music);
     let minutes = music.len() as f64 / rate / 60.0;
     let wanted = (per_minute * minutes + rng.uniform()).floor().max(0.0) as usize;
@@ -106,7 +94,7 @@ pub fn plan(
         tries += 1;
         let start = starts[rng.below(starts.len())];
         let bars = if rng.uniform() < 0.5 { 2 } else { 4 };
-        let Some(p) = passage_at(&beats, start, bars, beats_per_bar, rate, gap, rng) else {
+        let Some(p) = passage_at(beats, start, bars, beats_per_bar, rate, gap, rng) else {
             continue;
         };
         let clear = out
@@ -317,9 +305,9 @@ mod tests {
     fn a_passage_runs_at_half_time_and_leaves_the_dance_on_the_bar() {
         let music = steady(25 * 90, 120.0, 4);
         let mut rng = Rng::new(3);
-        let passages = plan(&music, 25.0, 4, 2.0, &mut rng);
-        assert!(!passages.is_empty(), "no passage planned");
         let beats = beat_positions(&music);
+        let passages = plan(&music, &beats, 25.0, 4, 2.0, &mut rng);
+        assert!(!passages.is_empty(), "no passage planned");
         let times = warp_times(&beats, &passages);
         let frames_per_beat = 25.0 * 60.0 / 120.0;
         let p = passages[0];
@@ -352,7 +340,7 @@ mod tests {
     fn passages_are_whole_bars_apart_from_each_other_and_the_end() {
         let music = steady(25 * 120, 87.0, 3);
         let mut rng = Rng::new(9);
-        let passages = plan(&music, 25.0, 3, 3.0, &mut rng);
+        let passages = plan(&music, &beat_positions(&music), 25.0, 3, 3.0, &mut rng);
         assert!(passages.len() >= 3, "{passages:?}");
         for w in passages.windows(2) {
             assert!(w[0].end_frame + 150 <= w[1].start_frame, "{w:?}");

@@ -103,6 +103,17 @@ impl FeatureFrame {
     }
 }
 
+/// Beat (or bar) phase in [0, 1) from its sine and cosine (as [`FeatureLayout`] carries it);
+/// `None` when not finite or undefined (both near 0).
+pub fn phase_of(sin: f32, cos: f32) -> Option<f32> {
+    if !sin.is_finite() || !cos.is_finite() || sin * sin + cos * cos < 1e-6 {
+        return None;
+    }
+    let p = (sin.atan2(cos) / std::f32::consts::TAU).rem_euclid(1.0);
+    // rem_euclid can return exactly 1.0 for tiny negative inputs.
+    Some(if p >= 1.0 { 0.0 } else { p })
+}
+
 /// The music a dancer hears, frame by frame, when each frame is predicted from the analysis
 /// `horizon` frames earlier: element j is `frames[j − horizon].predicted_at(frames[j].time_s)`
 /// (from the first frame while j < horizon). This is what the live pipeline hands a dancer

@@ -10,7 +10,7 @@
 //! pose. Clip switches are hidden by decaying the pose offset at the switch to identity
 //! ("inertialization-lite").
 
-use dsp::feature::{FEATURE_DIM, FeatureLayout};
+use dsp::feature::{FEATURE_DIM, FeatureLayout, phase_of};
 use glam::{Quat, Vec3};
 use thiserror::Error;
 
@@ -92,16 +92,6 @@ pub struct ClipLibrary {
     pub clips: Vec<Clip>,
     /// Median [`Clip::motion`] over the library: what "moving normally" means for these dances.
     pub typical_motion: f32,
-}
-
-/// Beat (or bar) phase in [0, 1) from its sine and cosine; `None` when not finite or undefined.
-fn phase_of(sin: f32, cos: f32) -> Option<f32> {
-    if !sin.is_finite() || !cos.is_finite() || sin * sin + cos * cos < 1e-6 {
-        return None;
-    }
-    let p = (sin.atan2(cos) / std::f32::consts::TAU).rem_euclid(1.0);
-    // rem_euclid can return exactly 1.0 for tiny negative inputs.
-    Some(if p >= 1.0 { 0.0 } else { p })
 }
 
 /// Shortest distance between two phases in turns, [0, 0.5].

@@ -1,6 +1,6 @@
 //! Training data: a tang2018 dance becomes aligned motion and music features.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use daemon::dataset::{build_dance, is_validation, write_dataset};
 use dsp::feature::FeatureLayout;
@@ -17,15 +17,24 @@ fn split_is_deterministic_and_stratified_by_style() {
     assert_eq!(val, [&names[2], &names[8]]);
 }
 
-#[test]
-fn a_dance_builds_into_aligned_finite_features() {
+/// The shared data folder and its dance DANCE_W_22 (a waltz), or None (said on stderr) when
+/// the data is absent.
+fn waltz_22() -> Option<(PathBuf, model::tang2018::TangDance)> {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
     let dir = data.join("tang2018/DANCE_W_22");
     if !dir.is_dir() {
         eprintln!("skipping: {} not found", dir.display());
-        return;
+        return None;
     }
     let dance = model::tang2018::load_dance(&dir).unwrap();
+    Some((data, dance))
+}
+
+#[test]
+fn a_dance_builds_into_aligned_finite_features() {
+    let Some((data, dance)) = waltz_22() else {
+        return;
+    };
     let built = build_dance(&dance, &data, false).unwrap();
     assert_eq!(built.motion.len(), built.music.len());
     assert!(
@@ -64,35 +73,18 @@ fn a_dance_builds_into_aligned_finite_features() {
     std::fs::remove_file(out.with_extension("json")).ok();
 }
 
-/// Mean joint speed (m per frame) of each frame of `motion` against the one before (0 for the
-/// first).
-fn joint_speeds(motion: &[model::motion::MotionFeatures]) -> Vec<f32> {
+/// The joint track of `motion` on the default rig, as the eval's speed measure reads it.
+fn track(motion: &[model::motion::MotionFeatures]) -> Vec<glam::Vec3> {
     let mut poses = Vec::new();
     model::motion::decode(motion, model::motion::RootState::ORIGIN, &mut poses);
-    let n = model::rig::JOINT_COUNT;
-    let p = model::rig::Skeleton::default_adult().trajectory(&poses);
-    (0..poses.len())
-        .map(|i| {
-            if i == 0 {
-                return 0.0;
-            }
-            (0..n)
-                .map(|j| (p[i * n + j] - p[(i - 1) * n + j]).length())
-                .sum::<f32>()
-                / n as f32
-        })
-        .collect()
+    model::rig::Skeleton::default_adult().trajectory(&poses)
 }
 
 #[test]
 fn quiet_passages_turn_the_song_down_and_slow_the_dance_to_half_time() {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    let dir = data.join("tang2018/DANCE_W_22");
-    if !dir.is_dir() {
-        eprintln!("skipping: {} not found", dir.display());
+    let Some((data, dance)) = waltz_22() else {
         return;
-    }
-    let dance = model::tang2018::load_dance(&dir).unwrap();
+    };
     let plain = build_dance(&dance, &data, false).unwrap();
     let quiet = daemon::dataset::build_dance_augmented(&dance, &data, false, &[1.0], 2.0)
         .unwrap()
@@ -126,13 +118,18 @@ fn quiet_passages_turn_the_song_down_and_slow_the_dance_to_half_time() {
     let elsewhere = energy(&plain, &far) - energy(&quiet, &far);
     assert!(elsewhere.abs() < 0.3, "elsewhere {elsewhere:.2} dB quieter");
     // Half time inside (the edges glide), the same speed elsewhere.
-    let (s_plain, s_quiet) = (joint_speeds(&plain.motion), joint_speeds(&quiet.motion));
-    let mean = |s: &[f32], keep: &dyn Fn(usize) -> bool| {
-        let v: Vec<f32> = (1..s.len()).filter(|&i| keep(i)).map(|i| s[i]).collect();
-        v.iter().sum::<f32>() / v.len() as f32
+    // The measure of the music table (`danced eval`): mean joint speed in the passages over
+    // the rest.
+    let spans: Vec<(f64, f64)> = quiet
+        .quiet
+        .iter()
+        .map(|&(a, b)| (a as f64 / 25.0, b as f64 / 25.0))
+        .collect();
+    let ratio_of = |motion: &[model::motion::MotionFeatures]| {
+        let (inside, rest) = daemon::eval::speed_inside_and_out(&track(motion), &spans);
+        inside / rest
     };
-    let ratio = mean(&s_quiet, &inside) / mean(&s_quiet, &|i| !inside(i));
-    let plain_ratio = mean(&s_plain, &inside) / mean(&s_plain, &|i| !inside(i));
+    let (ratio, plain_ratio) = (ratio_of(&quiet.motion), ratio_of(&plain.motion));
     eprintln!(
         "{} passages: {drop:.1} dB quieter inside, {elsewhere:.2} dB elsewhere; joint speed inside / rest {ratio:.2} (as captured {plain_ratio:.2})",
         quiet.quiet.len()

@@ -28,6 +28,12 @@ pub const KEY_SPLICE_GLIDE: usize = 50;
 /// Frames over which a spliced key pose's offset fades after the pose is reached (1 s).
 pub const KEY_SPLICE_RELEASE: usize = 25;
 
+/// The joint rotations of frame `f` of a normalised dance's flat `motion`: what a key pose
+/// fixes.
+fn rotations(motion: &[f32], f: usize) -> &[f32] {
+    &motion[f * P + ROTATIONS..][..KEY_ROT_DIM]
+}
+
 /// 3x² − 2x³ of `x` clamped to [0, 1].
 fn smoothstep(x: f32) -> f32 {
     let x = x.clamp(0.0, 1.0);
@@ -265,9 +271,8 @@ impl Corpus {
         // A spliced key pose: its rotations, their offset from the dance's own at the key
         // frame, and the glide's start.
         let splice = key.zip(donor).map(|((at, kf), (dd, df))| {
-            let own = &d.motion[kf * P + ROTATIONS..kf * P + ROTATIONS + KEY_ROT_DIM];
-            let pose =
-                &self.dances[dd].motion[df * P + ROTATIONS..df * P + ROTATIONS + KEY_ROT_DIM];
+            let own = rotations(&d.motion, kf);
+            let pose = rotations(&self.dances[dd].motion, df);
             let offset: Vec<f32> = pose.iter().zip(own).map(|(a, b)| a - b).collect();
             let glide_from = (start + at).max(kf.saturating_sub(KEY_SPLICE_GLIDE));
             (pose, offset, glide_from, kf)
@@ -312,7 +317,7 @@ impl Corpus {
                     (
                         match &splice {
                             Some((pose, ..)) => *pose,
-                            None => &d.motion[kf * P + ROTATIONS..kf * P + ROTATIONS + KEY_ROT_DIM],
+                            None => rotations(&d.motion, kf),
                         },
                         (kf - f) as u32,
                     )
@@ -345,6 +350,17 @@ impl Corpus {
         batch.sequences += 1;
     }
 
+    /// The (dance, frame) of the corpus' `pick`-th frame, counting through the dances in turn
+    /// (`pick` < [`Corpus::frames`]).
+    fn frame_at(&self, mut pick: usize) -> (usize, usize) {
+        let mut dance = 0;
+        while pick >= self.dances[dance].frames {
+            pick -= self.dances[dance].frames;
+            dance += 1;
+        }
+        (dance, pick)
+    }
+
     /// A random batch; each sequence has a key pose with probability `1 − key_drop`.
     pub fn random_batch(&self, rng: &mut Rng, sequences: usize, key_drop: f64) -> Batch {
         let mut batch = Batch::default();
@@ -360,15 +376,7 @@ impl Corpus {
                         .partition_point(|&c| c <= pick)
                         .min(self.dances.len() - 1)
                 }
-                None => {
-                    let mut pick = rng.below(total);
-                    let mut dance = 0;
-                    while pick >= self.dances[dance].frames {
-                        pick -= self.dances[dance].frames;
-                        dance += 1;
-                    }
-                    dance
-                }
+                None => self.frame_at(rng.below(total)).0,
             };
             let n = self.dances[dance].frames;
             let start = 1 + rng.below(n - s - l);
@@ -380,13 +388,7 @@ impl Corpus {
             // Drawn only when asked for, so runs without splicing keep their random stream.
             let donor = match key {
                 Some(_) if self.key_splice > 0.0 && rng.uniform() < self.key_splice => {
-                    let mut pick = rng.below(total);
-                    let mut dd = 0;
-                    while pick >= self.dances[dd].frames {
-                        pick -= self.dances[dd].frames;
-                        dd += 1;
-                    }
-                    Some((dd, pick))
+                    Some(self.frame_at(rng.below(total)))
                 }
                 _ => None,
             };

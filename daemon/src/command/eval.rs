@@ -53,9 +53,12 @@ fn ablation(name: &str) -> bool {
     [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name)
 }
 
-/// The dancers scored: retrieval (and on the full library), the neural dancer as shipped, its
-/// ablations and the network alone.
-fn sources(o: &EvalArgs) -> Result<Vec<(String, Box<dyn MotionSource>)>> {
+/// The dancers scored: retrieval (and on the full library), the neural dancer on `model` as
+/// shipped, its ablations and the network alone.
+fn sources(
+    o: &EvalArgs,
+    model: &model::neural::file::NeuralModel,
+) -> Result<Vec<(String, Box<dyn MotionSource>)>> {
     let mut libraries = vec![(
         "retrieval",
         crate::dancer::load_library(o.library.as_deref())?.0,
@@ -70,23 +73,22 @@ fn sources(o: &EvalArgs) -> Result<Vec<(String, Box<dyn MotionSource>)>> {
     for (name, lib) in libraries {
         sources.push((name.to_string(), Box::new(crate::eval::retrieval(lib)?)));
     }
-    let model = crate::dancer::load_model(o.model.as_deref())?;
     sources.push((
         "neural".into(),
-        Box::new(crate::dancer::neural_dancer(&model, o.seed)?),
+        Box::new(crate::dancer::neural_dancer(model, o.seed)?),
     ));
     // Ablations: the network's own timing, a fresh noise draw every frame, free feet.
-    let mut own_timing = crate::dancer::neural_dancer(&model, o.seed)?;
+    let mut own_timing = crate::dancer::neural_dancer(model, o.seed)?;
     own_timing.set_beat_accent(0.0);
     sources.push((NO_ACCENT.into(), Box::new(own_timing)));
-    let mut fresh_noise = crate::dancer::neural_dancer(&model, o.seed)?;
+    let mut fresh_noise = crate::dancer::neural_dancer(model, o.seed)?;
     fresh_noise.set_noise_correlation(0.0);
     sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
-    let mut free_feet = crate::dancer::neural_dancer(&model, o.seed)?;
+    let mut free_feet = crate::dancer::neural_dancer(model, o.seed)?;
     free_feet.set_foot_lock(0.0);
     sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
     // The network alone: every safety net off but the non-finite guard.
-    let mut alone = crate::dancer::neural_dancer(&model, o.seed)?;
+    let mut alone = crate::dancer::neural_dancer(model, o.seed)?;
     alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
     sources.push((NETWORK_ONLY.into(), Box::new(alone)));
     Ok(sources)
@@ -97,7 +99,8 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     let started = Instant::now();
     let temperatures = [0.0f32, 0.5, 1.0];
     if o.music {
-        let mut sources = sources(o)?;
+        let model = crate::dancer::load_model(o.model.as_deref())?;
+        let mut sources = sources(o, &model)?;
         sources.retain(|(n, _)| !ablation(n));
         music_table(o, &mut sources, &temperatures)?;
         eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
@@ -123,7 +126,7 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     }
     let mut styled = vec![("ground truth".to_string(), gt.clone())];
     let model = crate::dancer::load_model(o.model.as_deref())?;
-    let mut sources = sources(o)?;
+    let mut sources = sources(o, &model)?;
     for (name, dancer) in sources.iter_mut() {
         for t in temperatures {
             let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);
