@@ -8,8 +8,13 @@ use crate::flow::Flow;
 use crate::layers::Dense;
 use crate::transformer::Transformer;
 use model::motion::MOTION_FEATURE_DIM;
+use model::motion::ROTATIONS;
 use model::neural::config::NetConfig;
 use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::token::{
+    FLAG_AT, FTG_AT, KEY_AT, KEY_CONDITION_CLAMP, KEY_CONDITION_DIM, KEY_ROT_DIM, POSE_AT,
+    TOKEN_DIM,
+};
 
 /// Horizons of the auxiliary heads, frames (0.2, 0.4 and 1 s at 25 fps): the context must
 /// predict where the dance will be, not only the next frame, which the past alone already
@@ -33,6 +38,9 @@ pub struct Net {
     /// Training-only: not stored in the model file (the live dancer samples the flow alone);
     /// a resumed run starts them afresh.
     pub aux: Vec<Dense>,
+    /// Whether the flow also reads each token's key conditioning (`NetConfig::key_to_flow`).
+    #[module(skip)]
+    pub key_to_flow: bool,
 }
 
 /// What one forward pass scores: the flow's NLL of the next pose per row `[b·s]`, and the
@@ -80,7 +88,25 @@ impl Net {
             transformer: Transformer::load(t, c, device)?,
             flow: Flow::load(t, "flow", &c.flow(), device)?,
             aux,
+            key_to_flow: c.key_to_flow,
         })
+    }
+
+    /// What the flow is conditioned on, `[b·s, flow context]`: the transformer's context
+    /// `[b·s, d_model]`, and for a `key_to_flow` network each token's key conditioning as
+    /// `model::neural::token::key_condition` computes it live.
+    pub fn flow_context(&self, ctx: Tensor<2>, tokens: Tensor<3>) -> Tensor<2> {
+        if !self.key_to_flow {
+            return ctx;
+        }
+        let [b, s, _] = tokens.dims();
+        let flat = tokens.reshape([b * s, TOKEN_DIM]);
+        let flag = flat.clone().narrow(1, FLAG_AT, 1);
+        let key = flat.clone().narrow(1, KEY_AT, KEY_ROT_DIM);
+        let pose = flat.clone().narrow(1, POSE_AT + ROTATIONS, KEY_ROT_DIM);
+        let distance = ((key - pose) * flag).clamp(-KEY_CONDITION_CLAMP, KEY_CONDITION_CLAMP);
+        let rest = flat.narrow(1, FTG_AT, KEY_CONDITION_DIM - KEY_ROT_DIM);
+        Tensor::cat(vec![ctx, distance, rest], 1)
     }
 
     /// Writes the trainable weights into `t` (normalisation and seed entries are left as they
@@ -101,7 +127,7 @@ impl Net {
         futures: Option<Vec<Tensor<2>>>,
     ) -> Scores {
         let [b, s, _] = targets.dims();
-        let ctx = self.transformer.forward(tokens, styles);
+        let ctx = self.transformer.forward(tokens.clone(), styles);
         let aux = match futures {
             Some(f) => self
                 .aux
@@ -121,6 +147,7 @@ impl Net {
                 .collect(),
             None => Vec::new(),
         };
+        let ctx = self.flow_context(ctx, tokens);
         let next = self
             .flow
             .log_prob(targets.reshape([b * s, MOTION_FEATURE_DIM]), ctx)
@@ -136,7 +163,8 @@ impl Net {
         targets: Tensor<3>,
     ) -> Self {
         let [b, s, _] = targets.dims();
-        let ctx = self.transformer.forward(tokens, styles);
+        let ctx = self.transformer.forward(tokens.clone(), styles);
+        let ctx = self.flow_context(ctx, tokens);
         let flow = self
             .flow
             .data_init(targets.reshape([b * s, MOTION_FEATURE_DIM]), ctx);
@@ -144,6 +172,7 @@ impl Net {
             transformer: self.transformer,
             flow,
             aux: self.aux,
+            key_to_flow: self.key_to_flow,
         }
     }
 }
@@ -163,7 +192,19 @@ mod tests {
 
     #[test]
     fn streaming_matches_the_batched_network_across_the_window() {
-        let c = NetConfig::tiny();
+        streaming_matches_batched(NetConfig::tiny());
+    }
+
+    #[test]
+    fn streaming_matches_the_batched_network_with_the_key_in_the_flow() {
+        let c = NetConfig {
+            key_to_flow: true,
+            ..NetConfig::tiny()
+        };
+        streaming_matches_batched(c);
+    }
+
+    fn streaming_matches_batched(c: NetConfig) {
         let mut t = init_net(&c, 7);
         t.perturb(8, 0.1);
         let device = cpu_device();
@@ -174,8 +215,10 @@ mod tests {
         let mut r = Rng::new(1);
         let mut tokens: Vec<f32> = (0..s * TOKEN_DIM).map(|_| r.normal()).collect();
         for i in 0..s {
-            tokens[i * TOKEN_DIM + FLAG_AT] = (i % 3 == 0) as u8 as f32;
+            // The last token (s − 1 = 19) carries a key, so its key conditioning is not zero.
+            tokens[i * TOKEN_DIM + FLAG_AT] = (i % 3 == 1) as u8 as f32;
         }
+        assert_eq!(s % 3, 2);
         let tt =
             Tensor::<3>::from_data(TensorData::new(tokens.clone(), [1, s, TOKEN_DIM]), &device);
         // Conditioned on style 1 in both.
@@ -204,6 +247,12 @@ mod tests {
         let mut x = vec![0.0; MOTION_FEATURE_DIM];
         rt.sample(&z, &mut x);
         let ctx = Tensor::<2>::from_data(TensorData::new(last_ctx, [1, c.d_model]), &device);
+        let last = Tensor::<3>::from_data(
+            TensorData::new(tokens[(s - 1) * TOKEN_DIM..].to_vec(), [1, 1, TOKEN_DIM]),
+            &device,
+        );
+        let ctx = net.flow_context(ctx, last);
+        assert_eq!(ctx.dims()[1], c.flow().context);
         let zt = Tensor::<2>::from_data(TensorData::new(z, [1, MOTION_FEATURE_DIM]), &device);
         let xb = values(net.flow.inverse(zt, ctx).unwrap());
         let err = x

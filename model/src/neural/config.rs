@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::motion::MOTION_FEATURE_DIM;
-use crate::neural::token::TOKEN_DIM;
+use crate::neural::token::{KEY_CONDITION_DIM, TOKEN_DIM};
 
 /// Added to the coupling's raw scale before the sigmoid, so a fresh coupling scales by
 /// sigmoid(2) ≈ 0.88 and scales stay in (0, 1): bounded, so training cannot explode them.
@@ -69,6 +69,11 @@ pub struct NetConfig {
     /// token's embedding, `embed.style`); 0 = no style input (models before issue 21).
     #[serde(default)]
     pub styles: usize,
+    /// The flow also reads each token's key conditioning ([`crate::neural::token::key_condition`]:
+    /// the key pose's distance from the previous pose, the count-down, the flag) beside the
+    /// context; false in models before it (they condition on the key through the transformer only).
+    #[serde(default)]
+    pub key_to_flow: bool,
 }
 
 impl Default for NetConfig {
@@ -86,6 +91,7 @@ impl Default for NetConfig {
             flow_steps: 8,
             flow_hidden: 192,
             styles: crate::style::DanceStyle::COUNT,
+            key_to_flow: false,
         }
     }
 }
@@ -103,6 +109,7 @@ impl NetConfig {
             flow_steps: 2,
             flow_hidden: 16,
             styles: crate::style::DanceStyle::COUNT,
+            key_to_flow: false,
         }
     }
 
@@ -115,7 +122,12 @@ impl NetConfig {
     pub fn flow(&self) -> FlowConfig {
         FlowConfig {
             dim: MOTION_FEATURE_DIM,
-            context: self.d_model,
+            context: self.d_model
+                + if self.key_to_flow {
+                    KEY_CONDITION_DIM
+                } else {
+                    0
+                },
             hidden: self.flow_hidden,
             steps: self.flow_steps,
         }

@@ -7,7 +7,7 @@
 use crate::neural::config::{COUPLING_SCALE_OFFSET, LN_EPS, NetConfig, rope_frequency};
 use crate::neural::lu;
 use crate::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
-use crate::neural::token::FLAG_AT;
+use crate::neural::token::{FLAG_AT, key_condition};
 
 struct Dense {
     w: Vec<f32>,
@@ -191,7 +191,7 @@ impl Runtime {
             scores: vec![0.0; c.window],
             cos: vec![0.0; half],
             sin: vec![0.0; half],
-            ctx: vec![0.0; d],
+            ctx: vec![0.0; f.context],
             coupling_in: vec![0.0; f.half() + f.context],
             coupling_hidden: vec![0.0; f.hidden],
             coupling_out: vec![0.0; 2 * f.rest()],
@@ -217,7 +217,8 @@ impl Runtime {
         self.position = 0;
     }
 
-    /// Appends one token (`TOKEN_DIM` values) and returns its context vector.
+    /// Appends one token (`TOKEN_DIM` values) and returns its context vector (the transformer's;
+    /// a `key_to_flow` network's flow also reads the token's key conditioning).
     pub fn push(&mut self, token: &[f32]) -> &[f32] {
         let c = self.config;
         let (d, heads, dh) = (c.d_model, c.heads, c.head_dim());
@@ -299,8 +300,11 @@ impl Runtime {
         self.filled = count;
         self.slot = (slot + 1) % c.window;
         self.position += 1;
-        self.final_ln.apply(&self.x, &mut self.ctx);
-        &self.ctx
+        self.final_ln.apply(&self.x, &mut self.ctx[..d]);
+        if c.key_to_flow {
+            key_condition(token, &mut self.ctx[d..]);
+        }
+        &self.ctx[..d]
     }
 
     /// The flow's inverse at the last pushed token's context: `z` → normalised pose in `out`.

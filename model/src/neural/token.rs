@@ -26,6 +26,13 @@ pub const FTG_AT: usize = KEY_AT + KEY_ROT_DIM;
 pub const FLAG_AT: usize = FTG_AT + FTG_DIM;
 /// Width of a token.
 pub const TOKEN_DIM: usize = FLAG_AT + 1;
+/// Width of the key conditioning a flow reads directly ([`key_condition`]): how far each
+/// rotation feature is from the key pose, the count-down and the flag.
+pub const KEY_CONDITION_DIM: usize = KEY_ROT_DIM + FTG_DIM + 1;
+/// The key pose's distance per normalised rotation feature is clamped to ± this: a key pose
+/// far outside the data (a feature the data holds constant has a floored deviation of 0.01)
+/// must not drive the flow's couplings off their trained range.
+pub const KEY_CONDITION_CLAMP: f32 = 8.0;
 /// Frames-to-go beyond this are embedded as this (10 s at 25 fps): the count-down only needs
 /// to be precise near the target.
 pub const MAX_FRAMES_TO_GO: u32 = 250;
@@ -162,9 +169,51 @@ pub fn fill(token: &mut [f32], pose: &[f32], music: &[f32], key: Option<(&[f32],
     }
 }
 
+/// The key conditioning of `token` (a filled token) into `out` (`KEY_CONDITION_DIM` values):
+/// the key rotations minus the previous pose's, clamped to ±[`KEY_CONDITION_CLAMP`] (zero
+/// without a key), then the count-down embedding and the flag. Fed beside the transformer's
+/// context to the flow of a network built with `key_to_flow`, so the next pose can be drawn
+/// towards the key directly instead of through a context shared with 63 other tokens.
+pub fn key_condition(token: &[f32], out: &mut [f32]) {
+    let flag = token[FLAG_AT];
+    let pose = &token[POSE_AT + ROTATIONS..POSE_AT + ROTATIONS + KEY_ROT_DIM];
+    let key = &token[KEY_AT..KEY_AT + KEY_ROT_DIM];
+    for ((o, k), p) in out[..KEY_ROT_DIM].iter_mut().zip(key).zip(pose) {
+        *o = (flag * (k - p)).clamp(-KEY_CONDITION_CLAMP, KEY_CONDITION_CLAMP);
+    }
+    out[KEY_ROT_DIM..KEY_CONDITION_DIM].copy_from_slice(&token[FTG_AT..TOKEN_DIM]);
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn key_condition_is_the_key_minus_the_pose_and_zero_without_a_key() {
+        let pose: Vec<f32> = (0..MOTION_FEATURE_DIM).map(|i| i as f32 * 0.01).collect();
+        let music = [0.5; FEATURE_DIM];
+        let mut key = [0.0; KEY_ROT_DIM];
+        key[0] = 1.0;
+        key[1] = 100.0;
+        let mut token = [0.0; TOKEN_DIM];
+        let mut out = [1.0; KEY_CONDITION_DIM];
+        fill(&mut token, &pose, &music, Some((&key, 7)));
+        key_condition(&token, &mut out);
+        assert!(
+            (out[0] - (1.0 - pose[ROTATIONS])).abs() < 1e-6,
+            "{}",
+            out[0]
+        );
+        assert_eq!(out[1], KEY_CONDITION_CLAMP);
+        assert!((out[2] + pose[ROTATIONS + 2]).abs() < 1e-6);
+        let mut ftg = [0.0; FTG_DIM];
+        frames_to_go_embedding(7, &mut ftg);
+        assert_eq!(&out[KEY_ROT_DIM..KEY_ROT_DIM + FTG_DIM], &ftg);
+        assert_eq!(out[KEY_CONDITION_DIM - 1], 1.0);
+        fill(&mut token, &pose, &music, None);
+        key_condition(&token, &mut out);
+        assert!(out.iter().all(|&v| v == 0.0), "{out:?}");
+    }
 
     #[test]
     fn embedding_distinguishes_nearby_counts() {

@@ -73,6 +73,11 @@ pub struct TrainArgs {
     /// Build a network without a style input (the architecture before issue 21).
     #[arg(long)]
     pub no_style: bool,
+    /// Build a network whose flow also reads the key pose's distance from the previous pose
+    /// and the count-down directly (beside the transformer's context), so a key pose can
+    /// steer the next pose without passing through attention.
+    #[arg(long)]
+    pub key_to_flow: bool,
     /// Balance the styles in the sampled sequences: a style's share goes as its frames to the
     /// power 1 − this (0: by frames, 25 waltzes to 4 cha-chas; 1: every style equally often).
     #[arg(long, default_value_t = 0.0)]
@@ -276,10 +281,17 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         .collect();
     let val_pairs = pairs(&dances, true);
     let (mut model, fresh) = match &args.resume {
-        Some(path) => (
-            NeuralModel::load(path).with_context(|| format!("loading {}", path.display()))?,
-            false,
-        ),
+        Some(path) => {
+            let model =
+                NeuralModel::load(path).with_context(|| format!("loading {}", path.display()))?;
+            if args.key_to_flow && !model.config.key_to_flow {
+                bail!(
+                    "{} was built without --key-to-flow; a resumed run keeps its architecture",
+                    path.display()
+                );
+            }
+            (model, false)
+        }
         None => {
             let mut config = if args.tiny {
                 NetConfig::tiny()
@@ -289,6 +301,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             if args.no_style {
                 config.styles = 0;
             }
+            config.key_to_flow = args.key_to_flow;
             let mut m = NeuralModel {
                 config,
                 tensors: init_net(&config, args.seed),
@@ -423,6 +436,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     ) + if args.mirror { " --mirror" } else { "" }
         + if args.no_aux { " --no-aux" } else { "" }
         + if args.no_style { " --no-style" } else { "" }
+        + if args.key_to_flow {
+            " --key-to-flow"
+        } else {
+            ""
+        }
         + &option_if_set("--beat-retime", args.beat_retime)
         + &option_if_set("--style-balance", args.style_balance)
         + &option_if_set("--style-drop", args.style_drop)
