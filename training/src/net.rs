@@ -7,8 +7,7 @@ use burn::tensor::{Device, Tensor};
 use crate::flow::Flow;
 use crate::layers::Dense;
 use crate::transformer::Transformer;
-use model::motion::MOTION_FEATURE_DIM;
-use model::motion::ROTATIONS;
+use model::motion::{MOTION_FEATURE_DIM, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::tensors::{NamedTensors, WeightError};
 use model::neural::token::{
