@@ -80,6 +80,7 @@ pub struct Corpus {
     music_drop: f64,
     style_drop: f64,
     key_splice: f64,
+    pose_drop: f64,
     /// Cumulative sampling weight of each dance when styles are balanced (empty: every frame
     /// equally likely).
     balanced: Vec<f64>,
@@ -146,6 +147,7 @@ impl Corpus {
             music_drop: 0.0,
             style_drop: 0.0,
             key_splice: 0.0,
+            pose_drop: 0.0,
             balanced: Vec::new(),
         }
     }
@@ -159,6 +161,14 @@ impl Corpus {
     /// reading it.
     pub fn set_key_splice(&mut self, p: f64) {
         self.key_splice = p.clamp(0.0, 1.0);
+    }
+
+    /// Sets the fraction of training tokens whose previous pose is hidden (all zeros, the
+    /// normalised mean; MoGlow's data dropout, 0.7 in Yang et al.'s key-pose flow): with the
+    /// past always there it predicts the next pose to the noise floor and a key pose adds
+    /// nothing to the likelihood; with most of it hidden the key and the music must carry it.
+    pub fn set_pose_drop(&mut self, p: f64) {
+        self.pose_drop = p.clamp(0.0, 1.0);
     }
 
     /// Sets the fraction of training sequences whose style input is hidden (all zeros), so
@@ -327,6 +337,10 @@ impl Corpus {
             if let Some(rng) = noise.as_mut() {
                 for v in &mut tok[token::POSE_AT..token::POSE_AT + P] {
                     *v += self.input_noise * rng.normal();
+                }
+                // Drawn only when asked for, so runs without it keep their random stream.
+                if self.pose_drop > 0.0 && rng.uniform() < self.pose_drop {
+                    tok[token::POSE_AT..token::POSE_AT + P].fill(0.0);
                 }
             }
             batch.tokens.extend_from_slice(&tok);
@@ -716,6 +730,52 @@ mod tests {
         let after = kf + KEY_SPLICE_RELEASE;
         assert_eq!(target(&spliced, after), target(&plain, after));
         assert_ne!(target(&spliced, kf + 5), target(&plain, kf + 5));
+    }
+
+    #[test]
+    fn pose_drop_hides_that_share_of_previous_poses_and_nothing_else() {
+        let c = NetConfig::tiny();
+        let frames = 200;
+        let motion: Vec<[f32; P]> = (0..frames)
+            .map(|i| std::array::from_fn(|j| (i as f32 * 0.1 + j as f32).sin()))
+            .collect();
+        let music: Vec<[f32; M]> = (0..frames)
+            .map(|i| std::array::from_fn(|j| (i as f32 * 0.2 + j as f32).cos()))
+            .collect();
+        let norm = Normalizer::fit(&motion, &music);
+        let mut corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 32);
+        let hidden = |batch: &Batch| {
+            let tokens: Vec<&[f32]> = batch.tokens.chunks_exact(TOKEN_DIM).collect();
+            let n = tokens
+                .iter()
+                .filter(|t| {
+                    t[token::POSE_AT..token::POSE_AT + P]
+                        .iter()
+                        .all(|&v| v == 0.0)
+                })
+                .count();
+            n as f64 / tokens.len() as f64
+        };
+        let batch = corpus.random_batch(&mut Rng::new(3), 200, 0.3);
+        assert_eq!(hidden(&batch), 0.0);
+        corpus.set_pose_drop(0.7);
+        let dropped = corpus.random_batch(&mut Rng::new(3), 200, 0.3);
+        assert!(
+            (hidden(&dropped) - 0.7).abs() < 0.02,
+            "{}",
+            hidden(&dropped)
+        );
+        // Music, key slots and targets are untouched; only the pose slot is hidden.
+        for (a, b) in dropped
+            .tokens
+            .chunks_exact(TOKEN_DIM)
+            .zip(dropped.targets.chunks_exact(P))
+        {
+            assert!(a[token::POSE_AT + P..].iter().any(|&v| v != 0.0));
+            assert!(b.iter().any(|&v| v != 0.0));
+        }
+        // The validation set sees every pose.
+        assert_eq!(corpus.all_sequences().iter().map(hidden).sum::<f64>(), 0.0);
     }
 
     #[test]

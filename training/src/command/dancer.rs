@@ -66,6 +66,11 @@ pub struct TrainArgs {
     /// predicts).
     #[arg(long, default_value_t = 0.0)]
     pub key_splice: f64,
+    /// Fraction of training tokens whose previous pose is hidden (past-context dropout, as
+    /// MoGlow and Yang et al.'s key-pose flow train: 0.7 there), so the key pose and the
+    /// music must carry what the past otherwise predicts; 0 hides none.
+    #[arg(long, default_value_t = 0.0)]
+    pub pose_drop: f64,
     /// Train the next-pose likelihood alone, without the auxiliary future-pose heads (the
     /// recipe before issue 21).
     #[arg(long)]
@@ -327,6 +332,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     corpus.set_style_drop(args.style_drop);
     corpus.set_style_balance(args.style_balance);
     corpus.set_key_splice(args.key_splice);
+    corpus.set_pose_drop(args.pose_drop);
     if config.styles > 0 {
         let shares: Vec<String> = corpus
             .style_shares()
@@ -418,6 +424,12 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             args.key_splice
         );
     }
+    if args.pose_drop > 0.0 {
+        variants += &format!(
+            ", {} of the training tokens with the previous pose hidden",
+            args.pose_drop
+        );
+    }
     model.training.data = format!(
         "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig{variants}: {}",
         daemon::dataset::DATASET_VERSION,
@@ -446,6 +458,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--style-drop", args.style_drop)
         + &option_if_set("--quiet-passages", args.quiet_passages)
         + &option_if_set("--key-splice", args.key_splice)
+        + &option_if_set("--pose-drop", args.pose_drop)
         + &if args.speeds.is_empty() {
             String::new()
         } else {
