@@ -5,7 +5,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
-use training::command::{beats, dancer, downbeats};
+use training::command::{beats, dancer, downbeats, key_probe};
 
 /// Trains danced's networks: the neural dancer, the learned beat activation and the
 /// downbeat network.
@@ -24,6 +24,8 @@ enum Command {
     Beats(beats::TrainBeatsArgs),
     /// Train the downbeat network on songs whose beats carry their position in the bar.
     Downbeats(downbeats::TrainDownbeatsArgs),
+    /// Measure, teacher-forced, how much a key pose informs the frames before it.
+    KeyProbe(key_probe::KeyProbeArgs),
 }
 
 fn main() -> Result<()> {
@@ -37,5 +39,6 @@ fn main() -> Result<()> {
         Command::Dancer(args) => dancer::train(&args),
         Command::Beats(args) => beats::train_beats(&args),
         Command::Downbeats(args) => downbeats::train_downbeats(&args),
+        Command::KeyProbe(args) => key_probe::key_probe(&args),
     }
 }

@@ -154,6 +154,80 @@ impl Net {
         Scores { next, aux }
     }
 
+    /// Free-runs the network from token `at` of each sequence to token `at + horizon`, as the
+    /// live dancer does: each step samples the next pose from the flow (z ~ N(0, T²I)) and
+    /// feeds it back as the next token's previous pose (the tokens' music, key and count-down
+    /// stay the batch's), the transformer seeing at most its window. Returns the squared
+    /// distance, per sequence `[b]`, between the rotations of the pose reached on the last step
+    /// and the key the token at `at` announces (normalised units; Yang et al.'s key-pose loss,
+    /// which their flow needed to reach a key: the one-step likelihood gives no reason to).
+    /// None if the flow has become numerically singular.
+    pub fn key_rollout(
+        &self,
+        tokens: Tensor<3>,
+        styles: Option<Tensor<3>>,
+        at: usize,
+        horizon: usize,
+        window: usize,
+        temperature: f32,
+    ) -> Option<Tensor<1>> {
+        let [b, s, _] = tokens.dims();
+        let last = (at + horizon).min(s - 1);
+        let device = tokens.device();
+        let key = tokens
+            .clone()
+            .narrow(1, at, 1)
+            .reshape([b, TOKEN_DIM])
+            .narrow(1, KEY_AT, KEY_ROT_DIM);
+        let mut seq: Vec<Tensor<3>> = (0..=at).map(|t| tokens.clone().narrow(1, t, 1)).collect();
+        let mut reached = None;
+        for t in at..=last {
+            let from = (t + 1).saturating_sub(window);
+            let w = t + 1 - from;
+            let input = Tensor::cat(seq[from..=t].to_vec(), 1);
+            let rows = styles.as_ref().map(|st| {
+                let width = st.dims()[2];
+                st.clone().narrow(1, from, w).reshape([b * w, width])
+            });
+            let ctx = self
+                .transformer
+                .forward(input.clone(), rows)
+                .reshape([b, w, self.transformer_width()])
+                .narrow(1, w - 1, 1)
+                .reshape([b, self.transformer_width()]);
+            let ctx = self.flow_context(ctx, input.narrow(1, w - 1, 1));
+            let z = Tensor::random(
+                [b, MOTION_FEATURE_DIM],
+                burn::tensor::Distribution::Normal(0.0, 1.0),
+                &device,
+            )
+            .mul_scalar(temperature);
+            // Clamped as the live range clamp would: a pose run off the data must not turn the
+            // loss into a gradient explosion.
+            let pose = self.flow.inverse(z, ctx)?.clamp(-8.0, 8.0);
+            if t == last {
+                reached = Some(pose);
+                break;
+            }
+            let rest = tokens.clone().narrow(1, t + 1, 1).narrow(
+                2,
+                MOTION_FEATURE_DIM,
+                TOKEN_DIM - MOTION_FEATURE_DIM,
+            );
+            seq.push(Tensor::cat(
+                vec![pose.reshape([b, 1, MOTION_FEATURE_DIM]), rest],
+                2,
+            ));
+        }
+        let reached = reached?.narrow(1, ROTATIONS, KEY_ROT_DIM);
+        Some((reached - key).powi_scalar(2).sum_dim(1).reshape([b]))
+    }
+
+    /// The transformer's context width (`d_model`).
+    fn transformer_width(&self) -> usize {
+        self.transformer.width()
+    }
+
     /// Data-dependent initialisation of the flow's actnorms from one batch.
     pub fn data_init(
         self,

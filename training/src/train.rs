@@ -473,6 +473,67 @@ impl Corpus {
         best.map(|(_, i, s)| (i, s))
     }
 
+    /// A batch of `sequences` clean sequences for [`Trainer::step`]'s key-pose rollout: each
+    /// announces its own pose `horizon` frames after token `at` as the key pose on token
+    /// `at` (`at + horizon` < the sequence length).
+    pub fn rollout_batch(
+        &self,
+        rng: &mut Rng,
+        sequences: usize,
+        at: usize,
+        horizon: usize,
+    ) -> Batch {
+        let mut batch = Batch::default();
+        let (s, l) = (self.sequence, self.config.lookahead);
+        let horizon = horizon.min(s - 1 - at.min(s - 1));
+        let total = self.frames();
+        for _ in 0..sequences {
+            let dance = self.frame_at(rng.below(total)).0;
+            let n = self.dances[dance].frames;
+            let start = 1 + rng.below(n - s - l);
+            let key = Some((at, start + at + horizon));
+            self.push_sequence(&mut batch, dance, start, key, None, None);
+        }
+        batch
+    }
+
+    /// Every non-overlapping sequence with a key pose announced on its middle token (half a
+    /// sequence of past before it) and due `horizon` frames later (at most to the last
+    /// token), announcing `key`: teacher-forced, how much a key lowers the NLL of the frames
+    /// before it (`danced-train key-probe`).
+    pub fn key_probe(&self, horizon: usize, key: ProbeKey) -> Vec<Batch> {
+        let s = self.sequence;
+        let at = s / 2;
+        let horizon = horizon.min(s - 1 - at);
+        let mut out = Vec::new();
+        let mut batch = Batch::default();
+        for (i, d) in self.dances.iter().enumerate() {
+            let mut start = 1;
+            while start + s + self.config.lookahead <= d.frames {
+                let kf = start + at + horizon;
+                let announced = (key != ProbeKey::Absent).then_some((at, kf));
+                self.push_sequence(&mut batch, i, start, announced, None, None);
+                if key == ProbeKey::Foreign {
+                    let other = &self.dances[(i + 1) % self.dances.len()];
+                    let pose = rotations(&other.motion, kf.min(other.frames - 1));
+                    let first = batch.tokens.len() - s * TOKEN_DIM;
+                    let announced = batch.tokens[first..].chunks_exact_mut(TOKEN_DIM);
+                    for tok in announced.skip(at).take(horizon + 1) {
+                        tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
+                    }
+                }
+                if batch.sequences == 16 {
+                    out.push(std::mem::take(&mut batch));
+                }
+                start += s;
+            }
+        }
+        if batch.sequences > 0 {
+            out.push(batch);
+        }
+        out
+    }
+
     /// Every non-overlapping sequence, without key poses, in order (the validation set).
     pub fn all_sequences(&self) -> Vec<Batch> {
         let (s, l) = (self.sequence, self.config.lookahead);
@@ -493,6 +554,17 @@ impl Corpus {
         }
         out
     }
+}
+
+/// The key pose a [`Corpus::key_probe`] sequence announces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProbeKey {
+    /// The dance's own pose on the key frame: its future, as training announces it.
+    Own,
+    /// No key pose.
+    Absent,
+    /// The next dance's pose on that frame: a key the teacher-forced frames do not reach.
+    Foreign,
 }
 
 /// A batch as tensors: tokens, styles (None for a network without a style input), targets and
@@ -527,12 +599,30 @@ fn tensors(b: &Batch, device: &Device) -> BatchTensors {
     }
 }
 
+/// A key-pose rollout for [`Trainer::step`]: the network free-runs `batch` from token `at`
+/// for `horizon` frames at `temperature`, and `weight` times the squared distance from the
+/// key pose it reaches to the key announced (normalised rotations) joins the loss.
+pub struct KeyRollout {
+    /// Clean sequences from [`Corpus::rollout_batch`].
+    pub batch: Batch,
+    /// The token that announces the key pose.
+    pub at: usize,
+    /// Frames from the announcement to the key pose.
+    pub horizon: usize,
+    /// Temperature of the free-running samples.
+    pub temperature: f32,
+    /// Weight of the key-pose loss beside the NLL.
+    pub weight: f32,
+}
+
 /// The network under training with its optimiser.
 pub struct Trainer {
     net: Option<Net>,
     optim: ModuleOptimizer,
     device: Device,
     model: NeuralModel,
+    /// The key-pose loss of the last step's rollout (squared normalised distance), if any.
+    pub last_key_error: Option<f32>,
 }
 
 impl Trainer {
@@ -548,6 +638,7 @@ impl Trainer {
             optim,
             device,
             model,
+            last_key_error: None,
         })
     }
 
@@ -561,9 +652,10 @@ impl Trainer {
     }
 
     /// One optimiser step at learning rate `lr` on the next pose's NLL plus [`AUX_WEIGHT`]
-    /// times each future pose's (with `aux`); returns the batch's next-pose NLL, nats per
-    /// frame (a non-finite loss skips the update).
-    pub fn step(&mut self, batch: &Batch, lr: f64, aux: bool) -> f32 {
+    /// times each future pose's (with `aux`), plus the `rollout`'s key-pose loss (see
+    /// [`KeyRollout`]); returns the batch's next-pose NLL, nats per frame (a non-finite loss
+    /// skips the update).
+    pub fn step(&mut self, batch: &Batch, rollout: Option<&KeyRollout>, lr: f64, aux: bool) -> f32 {
         let Some(net) = self.net.take() else {
             return f32::NAN;
         };
@@ -571,10 +663,27 @@ impl Trainer {
         let scores = net.score(t.tokens, t.styles, t.targets, aux.then_some(t.futures));
         let next = scores.next.mean();
         let value = values(next.clone()).first().copied().unwrap_or(f32::NAN);
-        let loss = scores
+        let mut loss = scores
             .aux
             .into_iter()
             .fold(next, |l, a| l + a.mean().mul_scalar(AUX_WEIGHT));
+        if let Some(r) = rollout {
+            let rt = tensors(&r.batch, &self.device);
+            let [b, s, _] = rt.tokens.dims();
+            let styles = rt.styles.map(|st| {
+                let width = st.dims()[1];
+                st.reshape([b, s, width])
+            });
+            let window = self.model.config.window;
+            match net.key_rollout(rt.tokens, styles, r.at, r.horizon, window, r.temperature) {
+                Some(error) => {
+                    let error = error.mean();
+                    self.last_key_error = values(error.clone()).first().copied();
+                    loss = loss + error.mul_scalar(r.weight);
+                }
+                None => self.last_key_error = None,
+            }
+        }
         let value = if values(loss.clone()).first().is_some_and(|v| v.is_finite()) {
             value
         } else {
@@ -600,17 +709,22 @@ impl Trainer {
 
     /// Mean NLL over `batches`, nats per frame, without gradients.
     pub fn evaluate(&mut self, batches: &[Batch]) -> Result<f64, WeightError> {
+        let v = self.frame_nll(batches)?;
+        Ok(v.iter().map(|&x| x as f64).sum::<f64>() / v.len().max(1) as f64)
+    }
+
+    /// The NLL of every frame of `batches`, nats, in order (sequence by sequence, token by
+    /// token), without gradients.
+    pub fn frame_nll(&mut self, batches: &[Batch]) -> Result<Vec<f32>, WeightError> {
         let device = cpu_device();
         let config = self.model.config;
         let net = Net::load(&self.model().tensors, &config, &device)?;
-        let (mut sum, mut n) = (0.0f64, 0usize);
+        let mut out = Vec::new();
         for b in batches {
             let t = tensors(b, &device);
-            let v = values(net.score(t.tokens, t.styles, t.targets, None).next);
-            sum += v.iter().map(|&x| x as f64).sum::<f64>();
-            n += v.len();
+            out.extend(values(net.score(t.tokens, t.styles, t.targets, None).next));
         }
-        Ok(sum / n.max(1) as f64)
+        Ok(out)
     }
 }
 
@@ -655,10 +769,58 @@ mod tests {
         let before = tr.evaluate(&val).unwrap();
         for _ in 0..30 {
             let b = corpus.random_batch(&mut rng, 8, 0.5);
-            assert!(tr.step(&b, 3e-3, true).is_finite());
+            assert!(tr.step(&b, None, 3e-3, true).is_finite());
         }
         let after = tr.evaluate(&val).unwrap();
         assert!(after < before - 20.0, "NLL {before} → {after}");
+    }
+
+    #[test]
+    fn key_rollout_steps_pull_the_free_run_onto_the_key() {
+        let c = NetConfig::tiny();
+        let frames = 200;
+        let mut motion = vec![[0.0f32; P]; frames];
+        let mut music = vec![[0.0f32; M]; frames];
+        for i in 0..frames {
+            let ph = i as f32 * 0.3;
+            for (j, v) in motion[i].iter_mut().enumerate() {
+                *v = (ph + j as f32 * 0.1).sin();
+            }
+            music[i][0] = ph.sin();
+            music[i][1] = ph.cos();
+        }
+        let norm = Normalizer::fit(&motion, &music);
+        let corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
+        let mut model = NeuralModel {
+            config: c,
+            tensors: init_net(&c, 1),
+            training: TrainingSummary::default(),
+        };
+        model.set_normalizer(&norm);
+        let mut tr = Trainer::new(model).unwrap();
+        let mut rng = Rng::new(2);
+        tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
+        let at = c.window - 1;
+        let rollout = |lr: f64, tr: &mut Trainer| {
+            // The same sequences every time, free-run at T = 0: a deterministic error.
+            let r = KeyRollout {
+                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6),
+                at,
+                horizon: 6,
+                temperature: 0.0,
+                weight: 1.0,
+            };
+            let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
+            assert!(tr.step(&b, Some(&r), lr, false).is_finite());
+            tr.last_key_error.unwrap()
+        };
+        let before = rollout(0.0, &mut tr);
+        assert!(before > 1.0, "{before}");
+        for _ in 0..100 {
+            rollout(3e-3, &mut tr);
+        }
+        let after = rollout(0.0, &mut tr);
+        assert!(after < 0.5 * before, "key error {before} → {after}");
     }
 
     #[test]

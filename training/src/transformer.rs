@@ -117,6 +117,11 @@ impl Transformer {
         })
     }
 
+    /// The width of its context vectors (`d_model`).
+    pub fn width(&self) -> usize {
+        self.config.d_model
+    }
+
     /// Stores the transformer's weights.
     pub fn store(&self, t: &mut NamedTensors) {
         self.embed.store(t, "embed");

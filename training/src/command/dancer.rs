@@ -16,7 +16,11 @@ use model::neural::rng::Rng;
 use model::neural::tensors::init_net;
 use model::neural::token::Normalizer;
 
-use crate::train::{Batch, Corpus, DanceInput, Trainer};
+use crate::train::{Batch, Corpus, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer};
+
+/// Longest key-pose rollout, frames (2 s): the horizon, and the cost of a step grows
+/// with it (one transformer pass per frame).
+const KEY_ROLLOUT_MAX: usize = 50;
 
 /// Options of `danced-train dancer`.
 #[derive(clap::Args, Debug, Clone)]
@@ -66,6 +70,18 @@ pub struct TrainArgs {
     /// predicts).
     #[arg(long, default_value_t = 0.0)]
     pub key_splice: f64,
+    /// Weight of the key-pose rollout loss (Yang et al.'s key-pose loss): every step also
+    /// free-runs `--rollout-sequences` clean sequences from an announced key pose to its
+    /// frame (0.5–2 s) and adds this times the squared distance (normalised rotations) from
+    /// the pose reached to the key; 0 runs none.
+    #[arg(long, default_value_t = 0.0)]
+    pub key_rollout: f64,
+    /// Sequences free-run per step for the key-pose loss.
+    #[arg(long, default_value_t = 2)]
+    pub rollout_sequences: usize,
+    /// Temperature of the key-pose rollouts' samples.
+    #[arg(long, default_value_t = 0.5)]
+    pub rollout_temperature: f32,
     /// Fraction of training tokens whose previous pose is hidden (past-context dropout, as
     /// MoGlow and Yang et al.'s key-pose flow train: 0.7 there), so the key pose and the
     /// music must carry what the past otherwise predicts; 0 hides none.
@@ -108,7 +124,9 @@ pub struct TrainArgs {
     /// Threads building the dances.
     #[arg(long, default_value_t = 1)]
     pub jobs: usize,
-    /// Stop after this many steps (for smoke tests and speed measurements).
+    /// Stop after this many steps; the learning rate's cosine then runs over the steps (or
+    /// the time budget, whichever ends first), so a run's schedule does not depend on how
+    /// loaded the machine was.
     #[arg(long)]
     pub max_steps: Option<u64>,
     /// Use the tiny test network instead of the default size.
@@ -148,7 +166,8 @@ fn option_if_set(name: &str, value: f64) -> String {
     }
 }
 
-fn load_dances(
+/// The tang2018 dances built with their music (training and validation).
+pub(crate) fn load_dances(
     data: &Path,
     jobs: usize,
     speeds: &[f64],
@@ -179,7 +198,8 @@ type MirroredDance<'a> = (
     Option<usize>,
 );
 
-fn pairs(dances: &[BuiltDance], validation: bool) -> Vec<DanceInput<'_>> {
+/// The (motion, music, style) of the training or the validation dances.
+pub(crate) fn pairs(dances: &[BuiltDance], validation: bool) -> Vec<DanceInput<'_>> {
     dances
         .iter()
         .filter(|d| d.validation == validation)
@@ -192,7 +212,7 @@ fn pairs(dances: &[BuiltDance], validation: bool) -> Vec<DanceInput<'_>> {
 
 /// The dances with their motion re-posed on the default rig (see
 /// [`BuiltDance::motion_on_default_rig`]).
-fn on_default_rig(mut dances: Vec<BuiltDance>) -> Vec<BuiltDance> {
+pub(crate) fn on_default_rig(mut dances: Vec<BuiltDance>) -> Vec<BuiltDance> {
     for d in &mut dances {
         d.motion = d.motion_on_default_rig();
     }
@@ -239,7 +259,7 @@ fn report_quiet_passages(dances: &[BuiltDance]) {
     );
 }
 
-/// Warm-up, then cosine decay to a tenth of the peak over the time budget.
+/// Warm-up, then cosine decay to a tenth of the peak over the run (`progress` 0 to 1).
 fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
     let warm = ((step + 1) as f64 / 200.0).min(1.0);
     let cosine = 0.5 * (1.0 + (std::f64::consts::PI * progress.clamp(0.0, 1.0)).cos());
@@ -459,6 +479,17 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--quiet-passages", args.quiet_passages)
         + &option_if_set("--key-splice", args.key_splice)
         + &option_if_set("--pose-drop", args.pose_drop)
+        + &if args.key_rollout > 0.0 {
+            format!(
+                " --key-rollout {} --rollout-sequences {} --rollout-temperature {}",
+                args.key_rollout, args.rollout_sequences, args.rollout_temperature
+            )
+        } else {
+            String::new()
+        }
+        + &args
+            .max_steps
+            .map_or(String::new(), |m| format!(" --max-steps {m}"))
         + &if args.speeds.is_empty() {
             String::new()
         } else {
@@ -486,6 +517,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let started = Instant::now();
     let mut step: u64 = 0;
     let mut smoothed = f64::NAN;
+    let mut key_error = f64::NAN;
     let mut bad_steps = 0;
     let mut last_val = if val.is_empty() {
         None
@@ -504,10 +536,34 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 .with_context(|| format!("writing {}", args.out.display()))
         };
     while started.elapsed() < budget && args.max_steps.is_none_or(|m| step < m) {
-        let progress = started.elapsed().as_secs_f64() / budget.as_secs_f64().max(1e-9);
+        let by_time = started.elapsed().as_secs_f64() / budget.as_secs_f64().max(1e-9);
+        let by_steps = args
+            .max_steps
+            .map_or(0.0, |m| step as f64 / m.max(1) as f64);
+        let progress = by_time.max(by_steps);
         let lr = learning_rate(args.lr, step, progress);
         let batch = corpus.random_batch(&mut rng, args.batch, args.key_drop);
-        let loss = trainer.step(&batch, lr, !args.no_aux) as f64;
+        let rollout = (args.key_rollout > 0.0).then(|| {
+            // A full window of past before the announcement, as the live dancer has.
+            let at = config.window - 1;
+            let longest = KEY_ROLLOUT_MAX.min(args.sequence.saturating_sub(at + 1));
+            let horizon = KEY_HORIZON_MIN + rng.below(longest.saturating_sub(KEY_HORIZON_MIN) + 1);
+            KeyRollout {
+                batch: corpus.rollout_batch(&mut rng, args.rollout_sequences, at, horizon),
+                at,
+                horizon,
+                temperature: args.rollout_temperature,
+                weight: args.key_rollout as f32,
+            }
+        });
+        let loss = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux) as f64;
+        if let Some(e) = trainer.last_key_error.filter(|_| rollout.is_some()) {
+            key_error = if key_error.is_nan() {
+                f64::from(e)
+            } else {
+                0.98 * key_error + 0.02 * f64::from(e)
+            };
+        }
         bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
         if bad_steps >= 20 {
             bail!(
@@ -535,9 +591,14 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             checkpoint(&mut trainer, step, last_val, secs)?;
             // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
             let line = format!(
-                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame",
+                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}",
                 step / steps_per_epoch,
-                last_val.map_or("-".into(), |v| format!("{v:.2}"))
+                last_val.map_or("-".into(), |v| format!("{v:.2}")),
+                if key_error.is_nan() {
+                    String::new()
+                } else {
+                    format!(", key-pose rollout error {key_error:.2}")
+                }
             );
             if pb.is_hidden() {
                 eprintln!("{line}");

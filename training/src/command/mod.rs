@@ -3,3 +3,4 @@
 pub mod beats;
 pub mod dancer;
 pub mod downbeats;
+pub mod key_probe;
