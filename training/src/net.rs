@@ -25,6 +25,10 @@ pub const AUX_HORIZONS: [usize; 3] = [5, 10, 25];
 /// data holds constant cannot drive the loss to −∞.
 const AUX_LOG_SIGMA: (f32, f32) = (-5.0, 3.0);
 
+/// Largest normalised value a key-pose rollout may reach (the live range clamp keeps poses
+/// within the training data's, a few σ); a rollout beyond it is not scored.
+pub const ROLLOUT_BOUND: f32 = 8.0;
+
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
 /// [`AUX_HORIZONS`] frames ahead.
 #[derive(Module, Debug)]
@@ -157,11 +161,11 @@ impl Net {
     /// Free-runs the network from token `at` of each sequence to token `at + horizon`, as the
     /// live dancer does: each step samples the next pose from the flow (z ~ N(0, T²I)) and
     /// feeds it back as the next token's previous pose (the tokens' music, key and count-down
-    /// stay the batch's), the transformer seeing at most its window. Returns the squared
-    /// distance, per sequence `[b]`, between the rotations of the pose reached on the last step
+    /// stay the batch's), the transformer seeing at most its window. Returns the distance,
+    /// per sequence `[b]`, between the rotations of the pose reached on the last step
     /// and the key the token at `at` announces (normalised units; Yang et al.'s key-pose loss,
     /// which their flow needed to reach a key: the one-step likelihood gives no reason to).
-    /// None if the flow has become numerically singular.
+    /// None if the flow has become numerically singular or a pose left ±[`ROLLOUT_BOUND`].
     pub fn key_rollout(
         &self,
         tokens: Tensor<3>,
@@ -202,9 +206,17 @@ impl Net {
                 &device,
             )
             .mul_scalar(temperature);
-            // Clamped as the live range clamp would: a pose run off the data must not turn the
-            // loss into a gradient explosion.
-            let pose = self.flow.inverse(z, ctx)?.clamp(-8.0, 8.0);
+            let pose = self.flow.inverse(z, ctx)?;
+            // A free run that leaves the data (the flow's inverse amplifies by up to 1/σ per
+            // coupling) is dropped whole: clamping it would leave a zero gradient times an
+            // infinite one, NaN, in the weights.
+            let largest = crate::layers::values(pose.clone().abs().max());
+            if !largest
+                .first()
+                .is_some_and(|m| m.is_finite() && *m <= ROLLOUT_BOUND)
+            {
+                return None;
+            }
             if t == last {
                 reached = Some(pose);
                 break;
@@ -220,7 +232,17 @@ impl Net {
             ));
         }
         let reached = reached?.narrow(1, ROTATIONS, KEY_ROT_DIM);
-        Some((reached - key).powi_scalar(2).sum_dim(1).reshape([b]))
+        // The distance, not its square (Yang et al.'s L2): its gradient on the pose reached
+        // has unit norm however far the free run strayed, which the chain of steps then
+        // carries back.
+        Some(
+            (reached - key)
+                .powi_scalar(2)
+                .sum_dim(1)
+                .add_scalar(1e-6)
+                .sqrt()
+                .reshape([b]),
+        )
     }
 
     /// The transformer's context width (`d_model`).

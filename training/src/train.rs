@@ -600,8 +600,8 @@ fn tensors(b: &Batch, device: &Device) -> BatchTensors {
 }
 
 /// A key-pose rollout for [`Trainer::step`]: the network free-runs `batch` from token `at`
-/// for `horizon` frames at `temperature`, and `weight` times the squared distance from the
-/// key pose it reaches to the key announced (normalised rotations) joins the loss.
+/// for `horizon` frames at `temperature`, and `weight` times the distance from the key pose
+/// it reaches to the key announced (normalised rotations) joins the loss.
 pub struct KeyRollout {
     /// Clean sequences from [`Corpus::rollout_batch`].
     pub batch: Batch,
@@ -621,7 +621,7 @@ pub struct Trainer {
     optim: ModuleOptimizer,
     device: Device,
     model: NeuralModel,
-    /// The key-pose loss of the last step's rollout (squared normalised distance), if any.
+    /// The key-pose loss of the last step's rollout (normalised distance), if any.
     pub last_key_error: Option<f32>,
 }
 
@@ -679,7 +679,10 @@ impl Trainer {
                 Some(error) => {
                     let error = error.mean();
                     self.last_key_error = values(error.clone()).first().copied();
-                    loss = loss + error.mul_scalar(r.weight);
+                    // A free run that broke (non-finite) teaches nothing; the NLL still counts.
+                    if self.last_key_error.is_some_and(f32::is_finite) {
+                        loss = loss + error.mul_scalar(r.weight);
+                    }
                 }
                 None => self.last_key_error = None,
             }

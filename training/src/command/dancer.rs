@@ -72,8 +72,8 @@ pub struct TrainArgs {
     pub key_splice: f64,
     /// Weight of the key-pose rollout loss (Yang et al.'s key-pose loss): every step also
     /// free-runs `--rollout-sequences` clean sequences from an announced key pose to its
-    /// frame (0.5–2 s) and adds this times the squared distance (normalised rotations) from
-    /// the pose reached to the key; 0 runs none.
+    /// frame (0.5–2 s) and adds this times the distance (normalised rotations) from the
+    /// pose reached to the key; 0 runs none.
     #[arg(long, default_value_t = 0.0)]
     pub key_rollout: f64,
     /// Sequences free-run per step for the key-pose loss.
@@ -518,6 +518,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let mut step: u64 = 0;
     let mut smoothed = f64::NAN;
     let mut key_error = f64::NAN;
+    let mut skipped_rollouts = 0u64;
     let mut bad_steps = 0;
     let mut last_val = if val.is_empty() {
         None
@@ -557,7 +558,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             }
         });
         let loss = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux) as f64;
-        if let Some(e) = trainer.last_key_error.filter(|_| rollout.is_some()) {
+        let scored = trainer.last_key_error.filter(|e| e.is_finite());
+        skipped_rollouts += u64::from(rollout.is_some() && scored.is_none());
+        if let Some(e) = scored.filter(|_| rollout.is_some()) {
             key_error = if key_error.is_nan() {
                 f64::from(e)
             } else {
@@ -597,7 +600,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 if key_error.is_nan() {
                     String::new()
                 } else {
-                    format!(", key-pose rollout error {key_error:.2}")
+                    format!(
+                        ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts left the data, not scored)"
+                    )
                 }
             );
             if pb.is_hidden() {
