@@ -25,9 +25,12 @@ pub const AUX_HORIZONS: [usize; 3] = [5, 10, 25];
 /// data holds constant cannot drive the loss to −∞.
 const AUX_LOG_SIGMA: (f32, f32) = (-5.0, 3.0);
 
-/// Largest normalised value a key-pose rollout may reach (the live range clamp keeps poses
-/// within the training data's, a few σ); a rollout beyond it is not scored.
+/// Normalised values of a key-pose rollout's poses are clamped to ± this before they are fed
+/// back (the live range clamp keeps poses within the training data's, a few σ).
 pub const ROLLOUT_BOUND: f32 = 8.0;
+
+/// A key-pose rollout with a normalised value beyond ± this has exploded and is not scored.
+pub const ROLLOUT_EXPLODED: f32 = 1e3;
 
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
 /// [`AUX_HORIZONS`] frames ahead.
@@ -159,13 +162,15 @@ impl Net {
     }
 
     /// Free-runs the network from token `at` of each sequence to token `at + horizon`, as the
-    /// live dancer does: each step samples the next pose from the flow (z ~ N(0, T²I)) and
+    /// live dancer does: each step samples the next pose from the flow (z ~ N(0, T²I), drawn
+    /// from `rng`) and
     /// feeds it back as the next token's previous pose (the tokens' music, key and count-down
     /// stay the batch's), the transformer seeing at most its window. Returns the distance,
     /// per sequence `[b]`, between the rotations of the pose reached on the last step
     /// and the key the token at `at` announces (normalised units; Yang et al.'s key-pose loss,
     /// which their flow needed to reach a key: the one-step likelihood gives no reason to).
-    /// None if the flow has become numerically singular or a pose left ±[`ROLLOUT_BOUND`].
+    /// None if the flow has become numerically singular or a pose exploded (beyond
+    /// ±[`ROLLOUT_EXPLODED`]).
     pub fn key_rollout(
         &self,
         tokens: Tensor<3>,
@@ -174,6 +179,7 @@ impl Net {
         horizon: usize,
         window: usize,
         temperature: f32,
+        rng: &mut model::neural::rng::Rng,
     ) -> Option<Tensor<1>> {
         let [b, s, _] = tokens.dims();
         let last = (at + horizon).min(s - 1);
@@ -200,23 +206,27 @@ impl Net {
                 .narrow(1, w - 1, 1)
                 .reshape([b, self.transformer_width()]);
             let ctx = self.flow_context(ctx, input.narrow(1, w - 1, 1));
-            let z = Tensor::random(
-                [b, MOTION_FEATURE_DIM],
-                burn::tensor::Distribution::Normal(0.0, 1.0),
+            // Drawn from the trainer's own generator, not the backend's: that one is global
+            // to the process, and a draw here would change what another user seeded.
+            let noise: Vec<f32> = (0..b * MOTION_FEATURE_DIM)
+                .map(|_| temperature * rng.normal())
+                .collect();
+            let z = Tensor::from_data(
+                burn::tensor::TensorData::new(noise, [b, MOTION_FEATURE_DIM]),
                 &device,
-            )
-            .mul_scalar(temperature);
+            );
             let pose = self.flow.inverse(z, ctx)?;
-            // A free run that leaves the data (the flow's inverse amplifies by up to 1/σ per
-            // coupling) is dropped whole: clamping it would leave a zero gradient times an
-            // infinite one, NaN, in the weights.
+            // A free run that exploded (the flow's inverse amplifies by up to 1/σ per coupling)
+            // is dropped whole: clamped, its zero gradient times an infinite one would put NaN
+            // in the weights. One that merely strayed is clamped as the live range clamp would.
             let largest = crate::layers::values(pose.clone().abs().max());
             if !largest
                 .first()
-                .is_some_and(|m| m.is_finite() && *m <= ROLLOUT_BOUND)
+                .is_some_and(|m| m.is_finite() && *m <= ROLLOUT_EXPLODED)
             {
                 return None;
             }
+            let pose = pose.clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND);
             if t == last {
                 reached = Some(pose);
                 break;

@@ -613,6 +613,8 @@ pub struct KeyRollout {
     pub temperature: f32,
     /// Weight of the key-pose loss beside the NLL.
     pub weight: f32,
+    /// Seed of the rollout's sampling noise.
+    pub noise_seed: u64,
 }
 
 /// The network under training with its optimiser.
@@ -675,7 +677,17 @@ impl Trainer {
                 st.reshape([b, s, width])
             });
             let window = self.model.config.window;
-            match net.key_rollout(rt.tokens, styles, r.at, r.horizon, window, r.temperature) {
+            let mut rng = Rng::new(r.noise_seed);
+            let reached = net.key_rollout(
+                rt.tokens,
+                styles,
+                r.at,
+                r.horizon,
+                window,
+                r.temperature,
+                &mut rng,
+            );
+            match reached {
                 Some(error) => {
                     let error = error.mean();
                     self.last_key_error = values(error.clone()).first().copied();
@@ -812,6 +824,7 @@ mod tests {
                 horizon: 6,
                 temperature: 0.0,
                 weight: 1.0,
+                noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
             assert!(tr.step(&b, Some(&r), lr, false).is_finite());

@@ -555,6 +555,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 horizon,
                 temperature: args.rollout_temperature,
                 weight: args.key_rollout as f32,
+                noise_seed: rng.next_u64(),
             }
         });
         let loss = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux) as f64;
@@ -601,7 +602,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     String::new()
                 } else {
                     format!(
-                        ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts left the data, not scored)"
+                        ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts exploded, not scored)"
                     )
                 }
             );
