@@ -177,11 +177,11 @@ impl Net {
         styles: Option<Tensor<3>>,
         at: usize,
         horizon: usize,
-        window: usize,
         temperature: f32,
         rng: &mut model::neural::rng::Rng,
     ) -> Option<Tensor<1>> {
         let [b, s, _] = tokens.dims();
+        let window = self.transformer.window();
         let last = (at + horizon).min(s - 1);
         let device = tokens.device();
         let key = tokens

@@ -676,17 +676,9 @@ impl Trainer {
                 let width = st.dims()[1];
                 st.reshape([b, s, width])
             });
-            let window = self.model.config.window;
             let mut rng = Rng::new(r.noise_seed);
-            let reached = net.key_rollout(
-                rt.tokens,
-                styles,
-                r.at,
-                r.horizon,
-                window,
-                r.temperature,
-                &mut rng,
-            );
+            let reached =
+                net.key_rollout(rt.tokens, styles, r.at, r.horizon, r.temperature, &mut rng);
             match reached {
                 Some(error) => {
                     let error = error.mean();
