@@ -94,7 +94,7 @@ fn train_writes_a_model_that_generate_and_bench_use() {
     assert!(
         file.training
             .recipe
-            .ends_with("--beat-retime 0.2 --style-balance 0.5 --style-drop 0.1"),
+            .ends_with("--beat-retime 0.2 --style-balance 0.5 --style-drop 0.1 --max-steps 3"),
         "{}",
         file.training.recipe
     );
