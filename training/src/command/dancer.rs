@@ -18,10 +18,6 @@ use model::neural::token::Normalizer;
 
 use crate::train::{Batch, Corpus, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer};
 
-/// Longest key-pose rollout, frames (2 s): the horizon, and the cost of a step grows
-/// with it (one transformer pass per frame).
-const KEY_ROLLOUT_MAX: usize = 50;
-
 /// Options of `danced-train dancer`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
@@ -79,6 +75,10 @@ pub struct TrainArgs {
     /// Sequences free-run per step for the key-pose loss.
     #[arg(long, default_value_t = 2)]
     pub rollout_sequences: usize,
+    /// Longest key-pose rollout, frames (the horizon is drawn from 12 up to it; at most the
+    /// sequence minus a window).
+    #[arg(long, default_value_t = 50)]
+    pub rollout_horizon: usize,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -481,8 +481,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--pose-drop", args.pose_drop)
         + &if args.key_rollout > 0.0 {
             format!(
-                " --key-rollout {} --rollout-sequences {} --rollout-temperature {}",
-                args.key_rollout, args.rollout_sequences, args.rollout_temperature
+                " --key-rollout {} --rollout-sequences {} --rollout-horizon {} --rollout-temperature {}",
+                args.key_rollout,
+                args.rollout_sequences,
+                args.rollout_horizon,
+                args.rollout_temperature
             )
         } else {
             String::new()
@@ -547,7 +550,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         let rollout = (args.key_rollout > 0.0).then(|| {
             // A full window of past before the announcement, as the live dancer has.
             let at = config.window - 1;
-            let longest = KEY_ROLLOUT_MAX.min(args.sequence.saturating_sub(at + 1));
+            let longest = args
+                .rollout_horizon
+                .min(args.sequence.saturating_sub(at + 1));
             let horizon = KEY_HORIZON_MIN + rng.below(longest.saturating_sub(KEY_HORIZON_MIN) + 1);
             KeyRollout {
                 batch: corpus.rollout_batch(&mut rng, args.rollout_sequences, at, horizon),
