@@ -202,9 +202,9 @@ impl Net {
             let ctx = self
                 .transformer
                 .forward(input.clone(), rows)
-                .reshape([b, w, self.transformer_width()])
+                .reshape([b, w, self.transformer.width()])
                 .narrow(1, w - 1, 1)
-                .reshape([b, self.transformer_width()]);
+                .reshape([b, self.transformer.width()]);
             let ctx = self.flow_context(ctx, input.narrow(1, w - 1, 1));
             // Drawn from the trainer's own generator, not the backend's: that one is global
             // to the process, and a draw here would change what another user seeded.
@@ -253,11 +253,6 @@ impl Net {
                 .sqrt()
                 .reshape([b]),
         )
-    }
-
-    /// The transformer's context width (`d_model`).
-    fn transformer_width(&self) -> usize {
-        self.transformer.width()
     }
 
     /// Data-dependent initialisation of the flow's actnorms from one batch.

@@ -505,44 +505,39 @@ impl Corpus {
         let s = self.sequence;
         let at = s / 2;
         let horizon = horizon.min(s - 1 - at);
-        let mut out = Vec::new();
-        let mut batch = Batch::default();
-        for (i, d) in self.dances.iter().enumerate() {
-            let mut start = 1;
-            while start + s + self.config.lookahead <= d.frames {
-                let kf = start + at + horizon;
-                let announced = (key != ProbeKey::Absent).then_some((at, kf));
-                self.push_sequence(&mut batch, i, start, announced, None, None);
-                if key == ProbeKey::Foreign {
-                    let other = &self.dances[(i + 1) % self.dances.len()];
-                    let pose = rotations(&other.motion, kf.min(other.frames - 1));
-                    let first = batch.tokens.len() - s * TOKEN_DIM;
-                    let announced = batch.tokens[first..].chunks_exact_mut(TOKEN_DIM);
-                    for tok in announced.skip(at).take(horizon + 1) {
-                        tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
-                    }
+        self.sequences_in_order(|batch, i, start| {
+            let kf = start + at + horizon;
+            let announced = (key != ProbeKey::Absent).then_some((at, kf));
+            self.push_sequence(batch, i, start, announced, None, None);
+            if key == ProbeKey::Foreign {
+                let other = &self.dances[(i + 1) % self.dances.len()];
+                let pose = rotations(&other.motion, kf.min(other.frames - 1));
+                let first = batch.tokens.len() - s * TOKEN_DIM;
+                let announced = batch.tokens[first..].chunks_exact_mut(TOKEN_DIM);
+                for tok in announced.skip(at).take(horizon + 1) {
+                    tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
                 }
-                if batch.sequences == 16 {
-                    out.push(std::mem::take(&mut batch));
-                }
-                start += s;
             }
-        }
-        if batch.sequences > 0 {
-            out.push(batch);
-        }
-        out
+        })
     }
 
     /// Every non-overlapping sequence, without key poses, in order (the validation set).
     pub fn all_sequences(&self) -> Vec<Batch> {
+        self.sequences_in_order(|batch, dance, start| {
+            self.push_sequence(batch, dance, start, None, None, None)
+        })
+    }
+
+    /// Batches of 16 built by `push(batch, dance, start)` for every non-overlapping
+    /// sequence of every dance, in order.
+    fn sequences_in_order(&self, mut push: impl FnMut(&mut Batch, usize, usize)) -> Vec<Batch> {
         let (s, l) = (self.sequence, self.config.lookahead);
         let mut out = Vec::new();
         let mut batch = Batch::default();
         for (i, d) in self.dances.iter().enumerate() {
             let mut start = 1;
             while start + s + l <= d.frames {
-                self.push_sequence(&mut batch, i, start, None, None, None);
+                push(&mut batch, i, start);
                 if batch.sequences == 16 {
                     out.push(std::mem::take(&mut batch));
                 }
@@ -623,8 +618,16 @@ pub struct Trainer {
     optim: ModuleOptimizer,
     device: Device,
     model: NeuralModel,
-    /// The key-pose loss of the last step's rollout (normalised distance), if any.
-    pub last_key_error: Option<f32>,
+}
+
+/// What one [`Trainer::step`] scored.
+#[derive(Clone, Copy, Debug)]
+pub struct StepLoss {
+    /// The batch's next-pose NLL, nats per frame (non-finite: the update was skipped).
+    pub nll: f32,
+    /// The rollout's key-pose distance (normalised), None without a rollout or when it
+    /// exploded or broke and was not scored.
+    pub key_error: Option<f32>,
 }
 
 impl Trainer {
@@ -640,7 +643,6 @@ impl Trainer {
             optim,
             device,
             model,
-            last_key_error: None,
         })
     }
 
@@ -655,11 +657,20 @@ impl Trainer {
 
     /// One optimiser step at learning rate `lr` on the next pose's NLL plus [`AUX_WEIGHT`]
     /// times each future pose's (with `aux`), plus the `rollout`'s key-pose loss (see
-    /// [`KeyRollout`]); returns the batch's next-pose NLL, nats per frame (a non-finite loss
-    /// skips the update).
-    pub fn step(&mut self, batch: &Batch, rollout: Option<&KeyRollout>, lr: f64, aux: bool) -> f32 {
+    /// [`KeyRollout`]); a non-finite loss skips the update.
+    pub fn step(
+        &mut self,
+        batch: &Batch,
+        rollout: Option<&KeyRollout>,
+        lr: f64,
+        aux: bool,
+    ) -> StepLoss {
+        let mut scored = StepLoss {
+            nll: f32::NAN,
+            key_error: None,
+        };
         let Some(net) = self.net.take() else {
-            return f32::NAN;
+            return scored;
         };
         let t = tensors(batch, &self.device);
         let scores = net.score(t.tokens, t.styles, t.targets, aux.then_some(t.futures));
@@ -679,31 +690,27 @@ impl Trainer {
             let mut rng = Rng::new(r.noise_seed);
             let reached =
                 net.key_rollout(rt.tokens, styles, r.at, r.horizon, r.temperature, &mut rng);
-            match reached {
-                Some(error) => {
-                    let error = error.mean();
-                    self.last_key_error = values(error.clone()).first().copied();
-                    // A free run that broke (non-finite) teaches nothing; the NLL still counts.
-                    if self.last_key_error.is_some_and(f32::is_finite) {
-                        loss = loss + error.mul_scalar(r.weight);
-                    }
+            if let Some(error) = reached {
+                let error = error.mean();
+                // A free run that broke (non-finite) teaches nothing; the NLL still counts.
+                scored.key_error = values(error.clone())
+                    .first()
+                    .copied()
+                    .filter(|e| e.is_finite());
+                if scored.key_error.is_some() {
+                    loss = loss + error.mul_scalar(r.weight);
                 }
-                None => self.last_key_error = None,
             }
         }
-        let value = if values(loss.clone()).first().is_some_and(|v| v.is_finite()) {
-            value
-        } else {
-            f32::NAN
-        };
-        if !value.is_finite() {
+        if !values(loss.clone()).first().is_some_and(|v| v.is_finite()) || !value.is_finite() {
             // Skip the update: one bad batch must not poison the weights.
             self.net = Some(net);
-            return value;
+            return scored;
         }
+        scored.nll = value;
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         self.net = Some(self.optim.step(lr, net, grads));
-        value
+        scored
     }
 
     /// The current weights as a model (normalisation, seed and training record kept).
@@ -741,10 +748,8 @@ mod tests {
     use model::neural::file::TrainingSummary;
     use model::neural::tensors::init_net;
 
-    #[test]
-    fn a_few_steps_lower_the_nll_of_a_simple_dance() {
-        let c = NetConfig::tiny();
-        // A smooth, periodic "dance" with music that carries its phase.
+    /// A smooth, periodic "dance" of 200 frames with music that carries its phase.
+    fn periodic_dance() -> (Vec<[f32; P]>, Vec<[f32; M]>) {
         let frames = 200;
         let mut motion = vec![[0.0f32; P]; frames];
         let mut music = vec![[0.0f32; M]; frames];
@@ -756,6 +761,24 @@ mod tests {
             music[i][0] = ph.sin();
             music[i][1] = ph.cos();
         }
+        (motion, music)
+    }
+
+    /// A trainer of a fresh tiny network normalised by `norm`.
+    fn fresh_trainer(c: NetConfig, norm: &Normalizer) -> Trainer {
+        let mut model = NeuralModel {
+            config: c,
+            tensors: init_net(&c, 1),
+            training: TrainingSummary::default(),
+        };
+        model.set_normalizer(norm);
+        Trainer::new(model).unwrap()
+    }
+
+    #[test]
+    fn a_few_steps_lower_the_nll_of_a_simple_dance() {
+        let c = NetConfig::tiny();
+        let (motion, music) = periodic_dance();
         let norm = Normalizer::fit(&motion, &music);
         let corpus = Corpus::new(
             &[(&motion[..], &music[..], Some(1))],
@@ -763,20 +786,14 @@ mod tests {
             &c,
             2 * c.window,
         );
-        let mut model = NeuralModel {
-            config: c,
-            tensors: init_net(&c, 1),
-            training: TrainingSummary::default(),
-        };
-        model.set_normalizer(&norm);
-        let mut tr = Trainer::new(model).unwrap();
+        let mut tr = fresh_trainer(c, &norm);
         let mut rng = Rng::new(2);
         tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
         let val = corpus.all_sequences();
         let before = tr.evaluate(&val).unwrap();
         for _ in 0..30 {
             let b = corpus.random_batch(&mut rng, 8, 0.5);
-            assert!(tr.step(&b, None, 3e-3, true).is_finite());
+            assert!(tr.step(&b, None, 3e-3, true).nll.is_finite());
         }
         let after = tr.evaluate(&val).unwrap();
         assert!(after < before - 20.0, "NLL {before} → {after}");
@@ -785,26 +802,10 @@ mod tests {
     #[test]
     fn key_rollout_steps_pull_the_free_run_onto_the_key() {
         let c = NetConfig::tiny();
-        let frames = 200;
-        let mut motion = vec![[0.0f32; P]; frames];
-        let mut music = vec![[0.0f32; M]; frames];
-        for i in 0..frames {
-            let ph = i as f32 * 0.3;
-            for (j, v) in motion[i].iter_mut().enumerate() {
-                *v = (ph + j as f32 * 0.1).sin();
-            }
-            music[i][0] = ph.sin();
-            music[i][1] = ph.cos();
-        }
+        let (motion, music) = periodic_dance();
         let norm = Normalizer::fit(&motion, &music);
         let corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
-        let mut model = NeuralModel {
-            config: c,
-            tensors: init_net(&c, 1),
-            training: TrainingSummary::default(),
-        };
-        model.set_normalizer(&norm);
-        let mut tr = Trainer::new(model).unwrap();
+        let mut tr = fresh_trainer(c, &norm);
         let mut rng = Rng::new(2);
         tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
         let at = c.window - 1;
@@ -819,8 +820,9 @@ mod tests {
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
-            assert!(tr.step(&b, Some(&r), lr, false).is_finite());
-            tr.last_key_error.unwrap()
+            let scored = tr.step(&b, Some(&r), lr, false);
+            assert!(scored.nll.is_finite());
+            scored.key_error.unwrap()
         };
         let before = rollout(0.0, &mut tr);
         assert!(before > 1.0, "{before}");

@@ -259,6 +259,16 @@ fn report_quiet_passages(dances: &[BuiltDance]) {
     );
 }
 
+/// `mean` moved 2 % towards `x` (`x` itself while `mean` is NaN, i.e. unset): the smoothing of
+/// the progress line's figures.
+fn running_mean(mean: f64, x: f64) -> f64 {
+    if mean.is_nan() {
+        x
+    } else {
+        0.98 * mean + 0.02 * x
+    }
+}
+
 /// Warm-up, then cosine decay to a tenth of the peak over the run (`progress` 0 to 1).
 fn learning_rate(peak: f64, step: u64, progress: f64) -> f64 {
     let warm = ((step + 1) as f64 / 200.0).min(1.0);
@@ -563,15 +573,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 noise_seed: rng.next_u64(),
             }
         });
-        let loss = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux) as f64;
-        let scored = trainer.last_key_error.filter(|e| e.is_finite());
-        skipped_rollouts += u64::from(rollout.is_some() && scored.is_none());
-        if let Some(e) = scored.filter(|_| rollout.is_some()) {
-            key_error = if key_error.is_nan() {
-                f64::from(e)
-            } else {
-                0.98 * key_error + 0.02 * f64::from(e)
-            };
+        let scored = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux);
+        let loss = f64::from(scored.nll);
+        skipped_rollouts += u64::from(rollout.is_some() && scored.key_error.is_none());
+        if let Some(e) = scored.key_error {
+            key_error = running_mean(key_error, f64::from(e));
         }
         bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
         if bad_steps >= 20 {
@@ -584,11 +590,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             step += 1;
             continue;
         }
-        smoothed = if smoothed.is_nan() {
-            loss
-        } else {
-            0.98 * smoothed + 0.02 * loss
-        };
+        smoothed = running_mean(smoothed, loss);
         step += 1;
         let secs = started.elapsed().as_secs_f64();
         if step.is_multiple_of(steps_per_epoch) {
