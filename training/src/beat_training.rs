@@ -3,15 +3,15 @@
 //! at once with a binary cross-entropy against beat targets.
 
 use burn::module::Module;
-use burn::nn::PaddingConfig1d;
 use burn::nn::conv::{Conv1d, Conv1dConfig};
+use burn::nn::{Initializer, PaddingConfig1d};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use dsp::beat_activation::{BEAT_INPUT_DIM as I, BeatNetWeights};
 
 use crate::device::{cpu_device, training_device};
-use crate::layers::values;
+use crate::layers::{fan_in_uniform, values};
 use model::neural::rng::Rng;
 
 /// One song's network inputs (`[frames][BEAT_INPUT_DIM]`, flat) and beat targets (`[frames]`).
@@ -94,22 +94,40 @@ pub struct BeatNet {
 }
 
 impl BeatNet {
-    /// A freshly initialised network.
-    pub fn new(c: &BeatTrainConfig, device: &Device) -> Self {
+    /// A freshly initialised network, its weights drawn from `rng`.
+    pub fn new(c: &BeatTrainConfig, rng: &mut Rng, device: &Device) -> Self {
+        let mut net = Self::zeroed(c, device);
+        for conv in std::iter::once(&mut net.input)
+            .chain(&mut net.convs)
+            .chain(std::iter::once(&mut net.output))
+        {
+            let [out, inputs, kernel] = conv.weight.val().dims();
+            let fan_in = inputs * kernel;
+            conv.weight = fan_in_uniform([out, inputs, kernel], fan_in, rng, device);
+            conv.bias = Some(fan_in_uniform([out], fan_in, rng, device));
+        }
+        net
+    }
+
+    /// The network's layers with every weight zero, to be drawn or loaded.
+    fn zeroed(c: &BeatTrainConfig, device: &Device) -> Self {
+        let conv = |inputs, outputs, kernel| {
+            Conv1dConfig::new(inputs, outputs, kernel).with_initializer(Initializer::Zeros)
+        };
         let convs = c
             .dilations
             .iter()
             .map(|&d| {
-                Conv1dConfig::new(c.channels, c.channels, c.kernel)
+                conv(c.channels, c.channels, c.kernel)
                     .with_dilation(d)
                     .with_padding(PaddingConfig1d::Explicit((c.kernel - 1) * d, 0))
                     .init(device)
             })
             .collect();
         Self {
-            input: Conv1dConfig::new(I, c.channels, 1).init(device),
+            input: conv(I, c.channels, 1).init(device),
             convs,
-            output: Conv1dConfig::new(c.channels, 1, 1).init(device),
+            output: conv(c.channels, 1, 1).init(device),
         }
     }
 
@@ -227,11 +245,10 @@ pub fn train_beat_activation(
     mut report: impl FnMut(usize, f32, Option<f32>),
 ) -> BeatNetWeights {
     let device = training_device();
-    device.seed(c.seed);
     let (mean, std) = input_statistics(train);
-    let mut net = BeatNet::new(c, &device);
-    let mut optim: ModuleOptimizer = AdamConfig::new().init();
     let mut rng = Rng::new(c.seed);
+    let mut net = BeatNet::new(c, &mut rng, &device);
+    let mut optim: ModuleOptimizer = AdamConfig::new().init();
     for step in 1..=c.steps {
         let (x, y) = batch(train, c, &mean, &std, &mut rng);
         let x = Tensor::from_data(TensorData::new(x, [c.batch, I, c.sequence]), &device);
@@ -258,7 +275,7 @@ fn validation_loss(w: &BeatNetWeights, valid: &[BeatSong], c: &BeatTrainConfig) 
         return None;
     }
     let device = cpu_device();
-    let net = BeatNet::new(c, &device).load_weights(w, &device);
+    let net = BeatNet::zeroed(c, &device).load_weights(w, &device);
     let (mut sum, mut n) = (0.0f64, 0usize);
     for s in valid {
         let t = s.frames();
@@ -329,7 +346,7 @@ mod tests {
     fn exported_weights_stream_exactly_what_burn_computes() {
         let c = small();
         let device = cpu_device();
-        let net = BeatNet::new(&c, &device);
+        let net = BeatNet::new(&c, &mut Rng::new(5), &device);
         let (mean, std) = (vec![0.5; I], vec![2.0; I]);
         let w = net.export(&c, &mean, &std);
         let t = 60;

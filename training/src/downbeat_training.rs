@@ -3,7 +3,7 @@
 //! position of each tracked beat that lies on an annotated beat.
 
 use burn::module::Module;
-use burn::nn::{Linear, LinearConfig};
+use burn::nn::{Initializer, Linear, LinearConfig};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::activation::{log_softmax, relu};
 use burn::tensor::{Tensor, TensorData};
@@ -14,7 +14,7 @@ use dsp::downbeat_net::{
 use dsp::{BarFeatures, BarPointerParams, DownbeatClassifier};
 
 use crate::device::training_device;
-use crate::layers::values;
+use crate::layers::{fan_in_uniform, values};
 use dsp::metrics::BEAT_TOLERANCE_S;
 use model::neural::rng::Rng;
 
@@ -157,15 +157,22 @@ pub struct DownbeatNet {
 }
 
 impl DownbeatNet {
-    /// A freshly initialised network.
-    pub fn new(c: &DownbeatTrainConfig, device: &burn::tensor::Device) -> Self {
+    /// A freshly initialised network, its weights drawn from `rng`.
+    pub fn new(c: &DownbeatTrainConfig, rng: &mut Rng, device: &burn::tensor::Device) -> Self {
         let mut widths = vec![I];
         widths.extend(&c.hidden);
         widths.push(CLASS_COUNT);
         Self {
             layers: widths
                 .windows(2)
-                .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                .map(|w| {
+                    let mut layer = LinearConfig::new(w[0], w[1])
+                        .with_initializer(Initializer::Zeros)
+                        .init(device);
+                    layer.weight = fan_in_uniform([w[0], w[1]], w[0], rng, device);
+                    layer.bias = Some(fan_in_uniform([w[1]], w[0], rng, device));
+                    layer
+                })
                 .collect(),
         }
     }
@@ -245,10 +252,9 @@ pub fn train_downbeat_net(
     mut report: impl FnMut(usize, f32, &DownbeatNetWeights),
 ) -> DownbeatNetWeights {
     let device = training_device();
-    device.seed(c.seed);
-    let mut net = DownbeatNet::new(c, &device);
-    let mut optim: ModuleOptimizer = AdamConfig::new().init();
     let mut rng = Rng::new(c.seed);
+    let mut net = DownbeatNet::new(c, &mut rng, &device);
+    let mut optim: ModuleOptimizer = AdamConfig::new().init();
     let n = train.len().max(1);
     for step in 1..=c.steps {
         let rows: Vec<usize> = (0..c.batch).map(|_| rng.below(n)).collect();

@@ -5,6 +5,7 @@ use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use model::neural::config::LN_EPS;
+use model::neural::rng::Rng;
 use model::neural::tensors::{NamedTensors, WeightError};
 
 /// A trainable parameter from the named tensor `name` of shape `[n]`.
@@ -34,6 +35,23 @@ pub fn param2(
         TensorData::new(v, [r, c]),
         device,
     )))
+}
+
+/// A trainable parameter of `shape` drawn uniformly in ±1/√`fan_in` (burn's default for dense
+/// and convolution layers) from `rng`: burn's own generator is one per process, so a network
+/// initialised from it comes out different whenever another thread draws at the same time.
+pub fn fan_in_uniform<const D: usize>(
+    shape: [usize; D],
+    fan_in: usize,
+    rng: &mut Rng,
+    device: &Device,
+) -> Param<Tensor<D>> {
+    let bound = 1.0 / (fan_in.max(1) as f64).sqrt();
+    let n = shape.iter().product();
+    let v: Vec<f32> = (0..n)
+        .map(|_| ((2.0 * rng.uniform() - 1.0) * bound) as f32)
+        .collect();
+    Param::from_tensor(Tensor::from_data(TensorData::new(v, shape), device))
 }
 
 /// A constant (non-trainable) matrix.
