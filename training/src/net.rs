@@ -32,6 +32,19 @@ pub const ROLLOUT_BOUND: f32 = 8.0;
 /// A key-pose rollout with a normalised value beyond ± this has exploded and is not scored.
 pub const ROLLOUT_EXPLODED: f32 = 1e3;
 
+/// Where and how [`Net::key_rollout`] free-runs.
+#[derive(Clone, Copy, Debug)]
+pub struct FreeRun {
+    /// The token that announces the key pose (the free run starts there).
+    pub at: usize,
+    /// Frames from the announcement to the key pose.
+    pub horizon: usize,
+    /// Temperature of the samples.
+    pub temperature: f32,
+    /// Feed the sampled poses back without a gradient, so only the step onto the key learns.
+    pub detach_feedback: bool,
+}
+
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
 /// [`AUX_HORIZONS`] frames ahead.
 #[derive(Module, Debug)]
@@ -163,25 +176,28 @@ impl Net {
 
     /// Free-runs the network from token `at` of each sequence to token `at + horizon`, as the
     /// live dancer does: each step samples the next pose from the flow (z ~ N(0, T²I), drawn
-    /// from `rng`) and
-    /// feeds it back as the next token's previous pose (the tokens' music, key and count-down
-    /// stay the batch's), the transformer seeing at most its window. Returns the distance,
-    /// per sequence `[b]`, between the rotations of the pose reached on the last step
-    /// and the key the token at `at` announces (normalised units; Yang et al.'s key-pose loss,
-    /// which their flow needed to reach a key: the one-step likelihood gives no reason to).
-    /// None if the flow has become numerically singular or a pose exploded (beyond
-    /// ±[`ROLLOUT_EXPLODED`]).
+    /// from `rng`) and feeds it back as the next token's previous pose (the tokens' music, key
+    /// and count-down stay the batch's), the transformer seeing the whole sequence so far as
+    /// the live cache does. Returns the distance, per sequence `[b]`, between the rotations of
+    /// the pose reached on the last step and the key the token at `at` announces (normalised
+    /// units; Yang et al.'s key-pose loss, which their flow needed to reach a key: the one-step
+    /// likelihood gives no reason to). With `detach_feedback` the poses fed back are constants,
+    /// so the gradient reaches only the last step (truncated back-propagation). None if the
+    /// flow has become numerically singular or a pose exploded (beyond ±[`ROLLOUT_EXPLODED`]).
     pub fn key_rollout(
         &self,
         tokens: Tensor<3>,
         styles: Option<Tensor<3>>,
-        at: usize,
-        horizon: usize,
-        temperature: f32,
+        run: &FreeRun,
         rng: &mut model::neural::rng::Rng,
     ) -> Option<Tensor<1>> {
         let [b, s, _] = tokens.dims();
-        let window = self.transformer.window();
+        let FreeRun {
+            at,
+            horizon,
+            temperature,
+            detach_feedback,
+        } = *run;
         let last = (at + horizon).min(s - 1);
         let device = tokens.device();
         let key = tokens
@@ -192,12 +208,14 @@ impl Net {
         let mut seq: Vec<Tensor<3>> = (0..=at).map(|t| tokens.clone().narrow(1, t, 1)).collect();
         let mut reached = None;
         for t in at..=last {
-            let from = (t + 1).saturating_sub(window);
-            let w = t + 1 - from;
-            let input = Tensor::cat(seq[from..=t].to_vec(), 1);
+            // The whole sequence so far, not the last window: each layer's keys and values
+            // at the window's first tokens carry what those tokens attended to in turn (as
+            // the live cache keeps them), so the re-encoded window alone is another function.
+            let w = t + 1;
+            let input = Tensor::cat(seq[..=t].to_vec(), 1);
             let rows = styles.as_ref().map(|st| {
                 let width = st.dims()[2];
-                st.clone().narrow(1, from, w).reshape([b * w, width])
+                st.clone().narrow(1, 0, w).reshape([b * w, width])
             });
             let ctx = self
                 .transformer
@@ -236,8 +254,9 @@ impl Net {
                 MOTION_FEATURE_DIM,
                 TOKEN_DIM - MOTION_FEATURE_DIM,
             );
+            let fed = if detach_feedback { pose.detach() } else { pose };
             seq.push(Tensor::cat(
-                vec![pose.reshape([b, 1, MOTION_FEATURE_DIM]), rest],
+                vec![fed.reshape([b, 1, MOTION_FEATURE_DIM]), rest],
                 2,
             ));
         }
@@ -288,7 +307,7 @@ mod tests {
     use model::neural::rng::Rng;
     use model::neural::runtime::Runtime;
     use model::neural::tensors::init_net;
-    use model::neural::token::{FLAG_AT, TOKEN_DIM};
+    use model::neural::token::{FLAG_AT, KEY_AT, KEY_ROT_DIM, TOKEN_DIM};
 
     #[test]
     fn streaming_matches_the_batched_network_across_the_window() {
@@ -361,5 +380,77 @@ mod tests {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f32::max);
         assert!(err < 1e-3, "flow inverse differs by {err}");
+    }
+
+    #[test]
+    fn the_key_rollout_free_runs_as_the_live_runtime_does() {
+        for key_to_flow in [false, true] {
+            let c = NetConfig {
+                key_to_flow,
+                ..NetConfig::tiny()
+            };
+            let mut t = init_net(&c, 3);
+            t.perturb(4, 0.03);
+            let device = cpu_device();
+            let net = Net::load(&t, &c, &device).unwrap();
+            let mut rt = Runtime::new(&t, &c).unwrap();
+            // Announced after a full window of past and due 1.5 windows later, so the free run
+            // slides the window past the announcement.
+            let (at, horizon) = (c.window - 1, c.window * 3 / 2);
+            let s = at + horizon + 1;
+            let mut r = Rng::new(11);
+            let mut tokens: Vec<f32> = (0..s * TOKEN_DIM).map(|_| 0.5 * r.normal()).collect();
+            // Small, so the distance reflects the pose reached and not mostly the key's size.
+            let key: Vec<f32> = (0..KEY_ROT_DIM).map(|_| 0.1 * r.normal()).collect();
+            for (i, tok) in tokens.chunks_exact_mut(TOKEN_DIM).enumerate() {
+                let announced = i >= at;
+                tok[FLAG_AT] = f32::from(u8::from(announced));
+                if announced {
+                    tok[KEY_AT..KEY_AT + KEY_ROT_DIM].copy_from_slice(&key);
+                } else {
+                    tok[KEY_AT..KEY_AT + KEY_ROT_DIM].fill(0.0);
+                }
+            }
+            // The runtime, fed its own samples (z = 0) from the announcement on.
+            let mut pose = vec![0.0f32; MOTION_FEATURE_DIM];
+            let mut largest = 0.0f32;
+            for (i, tok) in tokens.chunks_exact(TOKEN_DIM).enumerate() {
+                let mut tok = tok.to_vec();
+                if i > at {
+                    tok[..MOTION_FEATURE_DIM].copy_from_slice(&pose);
+                }
+                rt.push(&tok);
+                if i >= at {
+                    rt.sample(&[0.0; MOTION_FEATURE_DIM], &mut pose);
+                    largest = pose.iter().fold(largest, |m, v| m.max(v.abs()));
+                }
+            }
+            let live = pose[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
+                .iter()
+                .zip(&key)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f32>()
+                .sqrt();
+            assert!(
+                largest < ROLLOUT_BOUND,
+                "the live free run reached {largest}, beyond the rollout's clamp: not comparable"
+            );
+            let tt = Tensor::<3>::from_data(TensorData::new(tokens, [1, s, TOKEN_DIM]), &device);
+            let mut rng = Rng::new(1);
+            for detach in [false, true] {
+                let run = FreeRun {
+                    at,
+                    horizon,
+                    temperature: 0.0,
+                    detach_feedback: detach,
+                };
+                let trained: f32 =
+                    values(net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap())[0];
+                assert!(
+                    (trained - live).abs() < 1e-4 * live,
+                    "key_to_flow {key_to_flow}: rollout {trained} vs live {live}"
+                );
+            }
+        }
     }
 }

@@ -7,7 +7,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::device::{cpu_device, training_device};
 use crate::layers::values;
-use crate::net::{AUX_HORIZONS, Net};
+use crate::net::{AUX_HORIZONS, FreeRun, Net};
 use dsp::feature::FEATURE_DIM as M;
 use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
 use model::neural::config::NetConfig;
@@ -595,17 +595,13 @@ fn tensors(b: &Batch, device: &Device) -> BatchTensors {
 }
 
 /// A key-pose rollout for [`Trainer::step`]: the network free-runs `batch` from token `at`
-/// for `horizon` frames at `temperature`, and `weight` times the distance from the key pose
-/// it reaches to the key announced (normalised rotations) joins the loss.
+/// as `run` says, and `weight` times the distance from the key pose it reaches to the key
+/// announced (normalised rotations) joins the loss.
 pub struct KeyRollout {
     /// Clean sequences from [`Corpus::rollout_batch`].
     pub batch: Batch,
-    /// The token that announces the key pose.
-    pub at: usize,
-    /// Frames from the announcement to the key pose.
-    pub horizon: usize,
-    /// Temperature of the free-running samples.
-    pub temperature: f32,
+    /// Where the free run starts, how long and how hot it runs.
+    pub run: FreeRun,
     /// Weight of the key-pose loss beside the NLL.
     pub weight: f32,
     /// Seed of the rollout's sampling noise.
@@ -688,8 +684,7 @@ impl Trainer {
                 st.reshape([b, s, width])
             });
             let mut rng = Rng::new(r.noise_seed);
-            let reached =
-                net.key_rollout(rt.tokens, styles, r.at, r.horizon, r.temperature, &mut rng);
+            let reached = net.key_rollout(rt.tokens, styles, &r.run, &mut rng);
             if let Some(error) = reached {
                 let error = error.mean();
                 // A free run that broke (non-finite) teaches nothing; the NLL still counts.
@@ -813,9 +808,12 @@ mod tests {
             // The same sequences every time, free-run at T = 0: a deterministic error.
             let r = KeyRollout {
                 batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6),
-                at,
-                horizon: 6,
-                temperature: 0.0,
+                run: FreeRun {
+                    at,
+                    horizon: 6,
+                    temperature: 0.0,
+                    detach_feedback: false,
+                },
                 weight: 1.0,
                 noise_seed: 9,
             };

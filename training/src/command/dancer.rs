@@ -16,6 +16,7 @@ use model::neural::rng::Rng;
 use model::neural::tensors::init_net;
 use model::neural::token::Normalizer;
 
+use crate::net::FreeRun;
 use crate::train::{Batch, Corpus, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer};
 
 /// Options of `danced-train dancer`.
@@ -79,6 +80,10 @@ pub struct TrainArgs {
     /// sequence minus a window).
     #[arg(long, default_value_t = 50)]
     pub rollout_horizon: usize,
+    /// Feed the rollouts' sampled poses back without a gradient, so only the step onto the
+    /// key pose learns (back-propagated through every step, the key loss rose as it trained).
+    #[arg(long)]
+    pub rollout_detach: bool,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -491,11 +496,16 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--pose-drop", args.pose_drop)
         + &if args.key_rollout > 0.0 {
             format!(
-                " --key-rollout {} --rollout-sequences {} --rollout-horizon {} --rollout-temperature {}",
+                " --key-rollout {} --rollout-sequences {} --rollout-horizon {} --rollout-temperature {}{}",
                 args.key_rollout,
                 args.rollout_sequences,
                 args.rollout_horizon,
-                args.rollout_temperature
+                args.rollout_temperature,
+                if args.rollout_detach {
+                    " --rollout-detach"
+                } else {
+                    ""
+                }
             )
         } else {
             String::new()
@@ -566,9 +576,12 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             let horizon = KEY_HORIZON_MIN + rng.below(longest.saturating_sub(KEY_HORIZON_MIN) + 1);
             KeyRollout {
                 batch: corpus.rollout_batch(&mut rng, args.rollout_sequences, at, horizon),
-                at,
-                horizon,
-                temperature: args.rollout_temperature,
+                run: FreeRun {
+                    at,
+                    horizon,
+                    temperature: args.rollout_temperature,
+                    detach_feedback: args.rollout_detach,
+                },
                 weight: args.key_rollout as f32,
                 noise_seed: rng.next_u64(),
             }
