@@ -86,6 +86,31 @@ pub struct Corpus {
     balanced: Vec<f64>,
 }
 
+/// Rebuilds `model` to read the key pose in its flow (`key_to_flow`) as well as through the
+/// transformer, the flow's new inputs weighted zero: it dances exactly as before until
+/// training moves them (a key-pose loss then reaches the key by the shortest path).
+pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
+    if model.config.key_to_flow {
+        return Ok(());
+    }
+    let before = model.config.flow();
+    let mut config = model.config;
+    config.key_to_flow = true;
+    let added = config.flow().context - before.context;
+    for k in 0..before.steps {
+        let name = format!("flow.{k}.c1.w");
+        let inputs = before.half() + before.context;
+        let mut w = model.tensors.get(&name, &[inputs, before.hidden])?.to_vec();
+        // Rows are inputs; the key conditioning follows the context.
+        w.resize((inputs + added) * before.hidden, 0.0);
+        model
+            .tensors
+            .insert(name, &[inputs + added, before.hidden], w);
+    }
+    model.config = config;
+    Ok(())
+}
+
 /// Width of a batch's style rows (the network's style count; 0 = no style input).
 fn style_width(config: &NetConfig) -> usize {
     config.styles
@@ -741,6 +766,7 @@ impl Trainer {
 mod tests {
     use super::*;
     use model::neural::file::TrainingSummary;
+    use model::neural::runtime::Runtime;
     use model::neural::tensors::init_net;
 
     /// A smooth, periodic "dance" of 200 frames with music that carries its phase.
@@ -768,6 +794,39 @@ mod tests {
         };
         model.set_normalizer(norm);
         Trainer::new(model).unwrap()
+    }
+
+    #[test]
+    fn a_network_given_the_key_in_its_flow_dances_as_before_until_trained() {
+        let c = NetConfig {
+            styles: 0,
+            ..NetConfig::tiny()
+        };
+        let mut t = init_net(&c, 4);
+        t.perturb(6, 0.05);
+        let mut model = NeuralModel {
+            config: c,
+            tensors: t,
+            training: TrainingSummary::default(),
+        };
+        let mut before = Runtime::new(&model.tensors, &model.config).unwrap();
+        add_key_to_flow(&mut model).unwrap();
+        assert!(model.config.key_to_flow);
+        let mut after = Runtime::new(&model.tensors, &model.config).unwrap();
+        let mut r = Rng::new(3);
+        let (mut a, mut b) = (vec![0.0; P], vec![0.0; P]);
+        for i in 0..12 {
+            let mut tok: Vec<f32> = (0..TOKEN_DIM).map(|_| r.normal()).collect();
+            tok[token::FLAG_AT] = f32::from(u8::from(i > 4));
+            before.push(&tok);
+            after.push(&tok);
+            let z: Vec<f32> = (0..P).map(|_| r.normal()).collect();
+            before.sample(&z, &mut a);
+            after.sample(&z, &mut b);
+            assert_eq!(a, b, "token {i}");
+        }
+        // The new inputs are trainable weights like the others: the rebuilt network loads.
+        assert!(Net::load(&model.tensors, &model.config, &cpu_device()).is_ok());
     }
 
     #[test]

@@ -17,7 +17,9 @@ use model::neural::tensors::init_net;
 use model::neural::token::Normalizer;
 
 use crate::net::FreeRun;
-use crate::train::{Batch, Corpus, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer};
+use crate::train::{
+    Batch, Corpus, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
+};
 
 /// Options of `danced-train dancer`.
 #[derive(clap::Args, Debug, Clone)]
@@ -101,7 +103,8 @@ pub struct TrainArgs {
     pub no_style: bool,
     /// Build a network whose flow also reads the key pose's distance from the previous pose
     /// and the count-down directly (beside the transformer's context), so a key pose can
-    /// steer the next pose without passing through attention.
+    /// steer the next pose without passing through attention. With `--resume` of a network
+    /// built without it, the flow's new inputs start at zero weight (the same dancer).
     #[arg(long)]
     pub key_to_flow: bool,
     /// Balance the styles in the sampled sequences: a style's share goes as its frames to the
@@ -322,11 +325,13 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let val_pairs = pairs(&dances, true);
     let (mut model, fresh) = match &args.resume {
         Some(path) => {
-            let model =
+            let mut model =
                 NeuralModel::load(path).with_context(|| format!("loading {}", path.display()))?;
             if args.key_to_flow && !model.config.key_to_flow {
-                bail!(
-                    "{} was built without --key-to-flow; a resumed run keeps its architecture",
+                add_key_to_flow(&mut model)
+                    .with_context(|| format!("giving {}'s flow the key pose", path.display()))?;
+                eprintln!(
+                    "{}: its flow now also reads the key pose (new weights zero: the same dancer until trained)",
                     path.display()
                 );
             }
