@@ -404,19 +404,9 @@ impl Corpus {
     pub fn random_batch(&self, rng: &mut Rng, sequences: usize, key_drop: f64) -> Batch {
         let mut batch = Batch::default();
         let (s, l) = (self.sequence, self.config.lookahead);
-        // Dances are drawn in proportion to their length, so every frame is equally likely, or
-        // by the style-balanced weights when they are set.
         let total = self.frames();
         for _ in 0..sequences {
-            let dance = match self.balanced.last() {
-                Some(&sum) => {
-                    let pick = rng.uniform() * sum;
-                    self.balanced
-                        .partition_point(|&c| c <= pick)
-                        .min(self.dances.len() - 1)
-                }
-                None => self.frame_at(rng.below(total)).0,
-            };
+            let dance = self.pick_dance(rng);
             let n = self.dances[dance].frames;
             let start = 1 + rng.below(n - s - l);
             let key = (rng.uniform() >= key_drop).then(|| {
@@ -434,6 +424,20 @@ impl Corpus {
             self.push_sequence(&mut batch, dance, start, key, donor, Some(rng));
         }
         batch
+    }
+
+    /// A dance drawn in proportion to its length, so every frame is equally likely, or by the
+    /// style-balanced weights when they are set.
+    fn pick_dance(&self, rng: &mut Rng) -> usize {
+        match self.balanced.last() {
+            Some(&sum) => {
+                let pick = rng.uniform() * sum;
+                self.balanced
+                    .partition_point(|&c| c <= pick)
+                    .min(self.dances.len() - 1)
+            }
+            None => self.frame_at(rng.below(self.frames())).0,
+        }
     }
 
     /// The seed clip of dance `dance` from frame `start`, raw (see
@@ -498,9 +502,10 @@ impl Corpus {
         best.map(|(_, i, s)| (i, s))
     }
 
-    /// A batch of `sequences` clean sequences for [`Trainer::step`]'s key-pose rollout: each
-    /// announces its own pose `horizon` frames after token `at` as the key pose on token
-    /// `at` (`at + horizon` < the sequence length).
+    /// A batch of `sequences` clean sequences for [`Trainer::step`]'s key-pose rollout (dances
+    /// drawn as [`Corpus::random_batch`] draws them): each announces its own pose `horizon`
+    /// frames after token `at` as the key pose on token `at` (`at + horizon` < the sequence
+    /// length).
     pub fn rollout_batch(
         &self,
         rng: &mut Rng,
@@ -511,9 +516,8 @@ impl Corpus {
         let mut batch = Batch::default();
         let (s, l) = (self.sequence, self.config.lookahead);
         let horizon = horizon.min(s - 1 - at.min(s - 1));
-        let total = self.frames();
         for _ in 0..sequences {
-            let dance = self.frame_at(rng.below(total)).0;
+            let dance = self.pick_dance(rng);
             let n = self.dances[dance].frames;
             let start = 1 + rng.below(n - s - l);
             let key = Some((at, start + at + horizon));
@@ -1055,6 +1059,14 @@ mod tests {
         assert!((corpus.style_shares()[0].1 - 100.0 / 2100.0).abs() < 1e-9);
         corpus.set_style_balance(1.0);
         assert!((cha_cha_share(&corpus) - 0.5).abs() < 0.04);
+        // The key-pose rollouts' sequences are balanced alike.
+        let rollouts = corpus.rollout_batch(&mut Rng::new(9), 2000, 4, 4);
+        let rows = rollouts.styles.chunks_exact(4).step_by(16);
+        let share = rows.filter(|r| r[0] == 1.0).count() as f64 / 2000.0;
+        assert!(
+            (share - 0.5).abs() < 0.04,
+            "rollouts' cha-cha share {share}"
+        );
         assert!((corpus.style_shares()[0].1 - 0.5).abs() < 1e-9);
         // Half-way: shares as the square roots of the styles' frames.
         corpus.set_style_balance(0.5);
