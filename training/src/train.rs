@@ -97,9 +97,9 @@ pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
     let mut config = model.config;
     config.key_to_flow = true;
     let added = config.flow().context - before.context;
+    let inputs = before.half() + before.context;
     for k in 0..before.steps {
         let name = format!("flow.{k}.c1.w");
-        let inputs = before.half() + before.context;
         let mut w = model.tensors.get(&name, &[inputs, before.hidden])?.to_vec();
         // Rows are inputs; the key conditioning follows the context.
         w.resize((inputs + added) * before.hidden, 0.0);

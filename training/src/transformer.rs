@@ -117,11 +117,6 @@ impl Transformer {
         })
     }
 
-    /// The tokens a context vector sees (its own and the ones before it).
-    pub fn window(&self) -> usize {
-        self.config.window
-    }
-
     /// The width of its context vectors (`d_model`).
     pub fn width(&self) -> usize {
         self.config.d_model
