@@ -41,8 +41,10 @@ pub struct FreeRun {
     pub horizon: usize,
     /// Temperature of the samples.
     pub temperature: f32,
-    /// Feed the sampled poses back without a gradient, so only the step onto the key learns.
-    pub detach_feedback: bool,
+    /// Steps the gradient flows back through from the pose reached (the poses fed back
+    /// before them are constants: truncated back-propagation); 1 teaches only the step onto
+    /// the key, None every step.
+    pub backprop_steps: Option<usize>,
 }
 
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
@@ -181,8 +183,8 @@ impl Net {
     /// the live cache does. Returns the distance, per sequence `[b]`, between the rotations of
     /// the pose reached on the last step and the key the token at `at` announces (normalised
     /// units; Yang et al.'s key-pose loss, which their flow needed to reach a key: the one-step
-    /// likelihood gives no reason to). With `detach_feedback` the poses fed back are constants,
-    /// so the gradient reaches only the last step (truncated back-propagation). None if the
+    /// likelihood gives no reason to). Poses fed back more than `backprop_steps` steps before
+    /// the last are constants (truncated back-propagation). None if the
     /// flow has become numerically singular or a pose exploded (beyond ±[`ROLLOUT_EXPLODED`]).
     pub fn key_rollout(
         &self,
@@ -196,7 +198,7 @@ impl Net {
             at,
             horizon,
             temperature,
-            detach_feedback,
+            backprop_steps,
         } = *run;
         let last = (at + horizon).min(s - 1);
         let device = tokens.device();
@@ -254,7 +256,11 @@ impl Net {
                 MOTION_FEATURE_DIM,
                 TOKEN_DIM - MOTION_FEATURE_DIM,
             );
-            let fed = if detach_feedback { pose.detach() } else { pose };
+            let fed = if backprop_steps.is_some_and(|k| last - t >= k) {
+                pose.detach()
+            } else {
+                pose
+            };
             seq.push(Tensor::cat(
                 vec![fed.reshape([b, 1, MOTION_FEATURE_DIM]), rest],
                 2,
@@ -437,12 +443,12 @@ mod tests {
             );
             let tt = Tensor::<3>::from_data(TensorData::new(tokens, [1, s, TOKEN_DIM]), &device);
             let mut rng = Rng::new(1);
-            for detach in [false, true] {
+            for backprop_steps in [None, Some(1), Some(3)] {
                 let run = FreeRun {
                     at,
                     horizon,
                     temperature: 0.0,
-                    detach_feedback: detach,
+                    backprop_steps,
                 };
                 let trained: f32 =
                     values(net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap())[0];

@@ -503,15 +503,17 @@ impl Corpus {
     }
 
     /// A batch of `sequences` clean sequences for [`Trainer::step`]'s key-pose rollout (dances
-    /// drawn as [`Corpus::random_batch`] draws them): each announces its own pose `horizon`
-    /// frames after token `at` as the key pose on token `at` (`at + horizon` < the sequence
-    /// length).
+    /// drawn as [`Corpus::random_batch`] draws them): each announces a key pose due `horizon`
+    /// frames after token `at`, on tokens `at` to `at + horizon` (< the sequence length) — its
+    /// own pose of that frame, or for a fraction `foreign` of them a pose from anywhere in the
+    /// training dances, as a performer calls a pose the dance was not heading for.
     pub fn rollout_batch(
         &self,
         rng: &mut Rng,
         sequences: usize,
         at: usize,
         horizon: usize,
+        foreign: f64,
     ) -> Batch {
         let mut batch = Batch::default();
         let (s, l) = (self.sequence, self.config.lookahead);
@@ -522,6 +524,16 @@ impl Corpus {
             let start = 1 + rng.below(n - s - l);
             let key = Some((at, start + at + horizon));
             self.push_sequence(&mut batch, dance, start, key, None, None);
+            // Drawn only when asked for, so runs without foreign keys keep their random stream.
+            if foreign > 0.0 && rng.uniform() < foreign {
+                let (other, frame) = self.frame_at(rng.below(self.frames()));
+                let pose = rotations(&self.dances[other].motion, frame);
+                let first = batch.tokens.len() - s * TOKEN_DIM;
+                let announced = batch.tokens[first..].chunks_exact_mut(TOKEN_DIM);
+                for tok in announced.skip(at).take(horizon + 1) {
+                    tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
+                }
+            }
         }
         batch
     }
@@ -858,6 +870,47 @@ mod tests {
     }
 
     #[test]
+    fn foreign_rollout_keys_are_training_poses_the_dance_was_not_heading_for() {
+        let c = NetConfig::tiny();
+        let (motion, music) = periodic_dance();
+        let other: Vec<[f32; P]> = motion.iter().map(|f| f.map(|v| 0.5 * v + 0.3)).collect();
+        let norm = Normalizer::fit(&motion, &music);
+        let dances: Vec<DanceInput> = vec![
+            (&motion[..], &music[..], None),
+            (&other[..], &music[..], None),
+        ];
+        let corpus = Corpus::new(&dances, &norm, &c, 2 * c.window);
+        let (s, at, horizon) = (2 * c.window, c.window - 1, 6);
+        let every_pose: Vec<&[f32]> = corpus
+            .dances
+            .iter()
+            .flat_map(|d| (0..d.frames).map(|f| rotations(&d.motion, f)))
+            .collect();
+        // Per sequence: is the announced key its own pose at the key frame?
+        let own_keys = |foreign: f64| -> Vec<bool> {
+            let b = corpus.rollout_batch(&mut Rng::new(5), 400, at, horizon, foreign);
+            (0..b.sequences)
+                .map(|i| {
+                    let tok = |t: usize| &b.tokens[(i * s + t) * TOKEN_DIM..][..TOKEN_DIM];
+                    let key = &tok(at)[token::KEY_AT..][..KEY_ROT_DIM];
+                    for t in at..=at + horizon {
+                        assert_eq!(&tok(t)[token::KEY_AT..][..KEY_ROT_DIM], key);
+                    }
+                    assert!(every_pose.contains(&key), "a key that is no training pose");
+                    let reached = &b.targets[(i * s + at + horizon) * P..][..P];
+                    key == rotations(reached, 0)
+                })
+                .collect()
+        };
+        let share = |v: Vec<bool>| v.iter().filter(|&&o| o).count() as f64 / v.len() as f64;
+        assert_eq!(share(own_keys(0.0)), 1.0);
+        let half = share(own_keys(0.5));
+        assert!((half - 0.5).abs() < 0.08, "own keys at 0.5: {half}");
+        let all = share(own_keys(1.0));
+        assert!(all < 0.05, "own keys at 1: {all}");
+    }
+
+    #[test]
     fn key_rollout_steps_pull_the_free_run_onto_the_key() {
         let c = NetConfig::tiny();
         let (motion, music) = periodic_dance();
@@ -870,12 +923,12 @@ mod tests {
         let rollout = |lr: f64, tr: &mut Trainer| {
             // The same sequences every time, free-run at T = 0: a deterministic error.
             let r = KeyRollout {
-                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6),
+                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0),
                 run: FreeRun {
                     at,
                     horizon: 6,
                     temperature: 0.0,
-                    detach_feedback: false,
+                    backprop_steps: None,
                 },
                 weight: 1.0,
                 noise_seed: 9,
@@ -1060,7 +1113,7 @@ mod tests {
         corpus.set_style_balance(1.0);
         assert!((cha_cha_share(&corpus) - 0.5).abs() < 0.04);
         // The key-pose rollouts' sequences are balanced alike.
-        let rollouts = corpus.rollout_batch(&mut Rng::new(9), 2000, 4, 4);
+        let rollouts = corpus.rollout_batch(&mut Rng::new(9), 2000, 4, 4, 0.0);
         let rows = rollouts.styles.chunks_exact(4).step_by(16);
         let share = rows.filter(|r| r[0] == 1.0).count() as f64 / 2000.0;
         assert!(

@@ -83,9 +83,20 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 50)]
     pub rollout_horizon: usize,
     /// Feed the rollouts' sampled poses back without a gradient, so only the step onto the
-    /// key pose learns (back-propagated through every step, the key loss rose as it trained).
-    #[arg(long)]
+    /// key pose learns (back-propagated through every step, the key loss rose as it trained);
+    /// the same as `--rollout-backprop 1`.
+    #[arg(long, conflicts_with = "rollout_backprop")]
     pub rollout_detach: bool,
+    /// Back-propagate the key-pose loss through only the last K steps of each rollout (the
+    /// poses fed back before them are constants), so the approach learns without the
+    /// gradient of a whole chain of flow inverses; default: every step.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub rollout_backprop: Option<u64>,
+    /// Fraction of rollouts whose key pose is taken from anywhere in the training dances
+    /// rather than the dance's own future (a performer calls poses the dance was not heading
+    /// for: the bank `danced eval` scores is of those); 0 announces only their own.
+    #[arg(long, default_value_t = 0.0)]
+    pub rollout_foreign: f64,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -171,6 +182,15 @@ fn option_if_set(name: &str, value: f64) -> String {
         format!(" {name} {value}")
     } else {
         String::new()
+    }
+}
+
+/// How many rollout steps the key-pose loss reaches back through (None: every step).
+fn rollout_backprop(args: &TrainArgs) -> Option<usize> {
+    if args.rollout_detach {
+        Some(1)
+    } else {
+        args.rollout_backprop.map(|k| k as usize)
     }
 }
 
@@ -506,12 +526,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 args.rollout_sequences,
                 args.rollout_horizon,
                 args.rollout_temperature,
-                if args.rollout_detach {
-                    " --rollout-detach"
-                } else {
-                    ""
+                match rollout_backprop(args) {
+                    Some(k) => format!(" --rollout-backprop {k}"),
+                    None => String::new(),
                 }
-            )
+            ) + &option_if_set("--rollout-foreign", args.rollout_foreign)
         } else {
             String::new()
         }
@@ -580,12 +599,18 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 .min(args.sequence.saturating_sub(at + 1));
             let horizon = KEY_HORIZON_MIN + rng.below(longest.saturating_sub(KEY_HORIZON_MIN) + 1);
             KeyRollout {
-                batch: corpus.rollout_batch(&mut rng, args.rollout_sequences, at, horizon),
+                batch: corpus.rollout_batch(
+                    &mut rng,
+                    args.rollout_sequences,
+                    at,
+                    horizon,
+                    args.rollout_foreign,
+                ),
                 run: FreeRun {
                     at,
                     horizon,
                     temperature: args.rollout_temperature,
-                    detach_feedback: args.rollout_detach,
+                    backprop_steps: rollout_backprop(&args),
                 },
                 weight: args.key_rollout as f32,
                 noise_seed: rng.next_u64(),
