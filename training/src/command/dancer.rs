@@ -610,7 +610,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     at,
                     horizon,
                     temperature: args.rollout_temperature,
-                    backprop_steps: rollout_backprop(&args),
+                    backprop_steps: rollout_backprop(args),
                 },
                 weight: args.key_rollout as f32,
                 noise_seed: rng.next_u64(),
