@@ -45,6 +45,10 @@ pub struct FreeRun {
     /// before them are constants: truncated back-propagation); 1 teaches only the step onto
     /// the key, None every step.
     pub backprop_steps: Option<usize>,
+    /// Frames before the key over which the distance is scored too, weighted 1 − g / this at
+    /// g frames to go (so the pose is drawn onto the key gradually, not in one step); 0
+    /// scores the key frame alone.
+    pub approach: usize,
 }
 
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
@@ -199,6 +203,7 @@ impl Net {
             horizon,
             temperature,
             backprop_steps,
+            approach,
         } = *run;
         let last = (at + horizon).min(s - 1);
         let device = tokens.device();
@@ -208,7 +213,8 @@ impl Net {
             .reshape([b, TOKEN_DIM])
             .narrow(1, KEY_AT, KEY_ROT_DIM);
         let mut seq: Vec<Tensor<3>> = (0..=at).map(|t| tokens.clone().narrow(1, t, 1)).collect();
-        let mut reached = None;
+        // The weighted sum of the distances scored so far, and the weights' sum.
+        let mut scored: Option<(Tensor<1>, f32)> = None;
         for t in at..=last {
             // The whole sequence so far, not the last window: each layer's keys and values
             // at the window's first tokens carry what those tokens attended to in turn (as
@@ -247,8 +253,20 @@ impl Net {
                 return None;
             }
             let pose = pose.clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND);
+            let to_go = last - t;
+            let weight = if to_go == 0 {
+                1.0
+            } else {
+                1.0 - to_go as f32 / approach.max(1) as f32
+            };
+            if weight > 0.0 {
+                let d = key_distance(pose.clone(), key.clone()).mul_scalar(weight);
+                scored = Some(match scored {
+                    Some((sum, w)) => (sum + d, w + weight),
+                    None => (d, weight),
+                });
+            }
             if t == last {
-                reached = Some(pose);
                 break;
             }
             let rest = tokens.clone().narrow(1, t + 1, 1).narrow(
@@ -266,18 +284,8 @@ impl Net {
                 2,
             ));
         }
-        let reached = reached?.narrow(1, ROTATIONS, KEY_ROT_DIM);
-        // The distance, not its square (Yang et al.'s L2): its gradient on the pose reached
-        // has unit norm however far the free run strayed, which the chain of steps then
-        // carries back.
-        Some(
-            (reached - key)
-                .powi_scalar(2)
-                .sum_dim(1)
-                .add_scalar(1e-6)
-                .sqrt()
-                .reshape([b]),
-        )
+        let (sum, weights) = scored?;
+        Some(sum.div_scalar(weights))
     }
 
     /// Data-dependent initialisation of the flow's actnorms from one batch.
@@ -300,6 +308,20 @@ impl Net {
             key_to_flow: self.key_to_flow,
         }
     }
+}
+
+/// Per sequence `[b]`, the distance between the rotations of `pose` `[b, P]` and `key`
+/// `[b, KEY_ROT_DIM]` (normalised units). The distance, not its square (Yang et al.'s L2):
+/// its gradient on the pose has unit norm however far the free run strayed, which the chain
+/// of steps then carries back.
+fn key_distance(pose: Tensor<2>, key: Tensor<2>) -> Tensor<1> {
+    let [b, _] = key.dims();
+    (pose.narrow(1, ROTATIONS, KEY_ROT_DIM) - key)
+        .powi_scalar(2)
+        .sum_dim(1)
+        .add_scalar(1e-6)
+        .sqrt()
+        .reshape([b])
 }
 
 #[cfg(test)]
@@ -417,9 +439,11 @@ mod tests {
                     tok[KEY_AT..KEY_AT + KEY_ROT_DIM].fill(0.0);
                 }
             }
-            // The runtime, fed its own samples (z = 0) from the announcement on.
+            // The runtime, fed its own samples (z = 0) from the announcement on: the distance
+            // of each step's pose from the key.
             let mut pose = vec![0.0f32; MOTION_FEATURE_DIM];
             let mut largest = 0.0f32;
+            let mut distances = Vec::new();
             for (i, tok) in tokens.chunks_exact(TOKEN_DIM).enumerate() {
                 let mut tok = tok.to_vec();
                 if i > at {
@@ -429,14 +453,28 @@ mod tests {
                 if i >= at {
                     rt.sample(&[0.0; MOTION_FEATURE_DIM], &mut pose);
                     largest = pose.iter().fold(largest, |m, v| m.max(v.abs()));
+                    let d = pose[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
+                        .iter()
+                        .zip(&key)
+                        .map(|(a, b)| (a - b) * (a - b))
+                        .sum::<f32>()
+                        .sqrt();
+                    distances.push(d);
                 }
             }
-            let live = pose[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
+            let live = distances[horizon];
+            // Over the last 8 frames too, weighted 1 − g / 8 at g frames to go.
+            let weights: Vec<f32> = (0..8).map(|g| 1.0 - g as f32 / 8.0).collect();
+            let approached = weights
                 .iter()
-                .zip(&key)
-                .map(|(a, b)| (a - b) * (a - b))
+                .enumerate()
+                .map(|(g, w)| w * distances[horizon - g])
                 .sum::<f32>()
-                .sqrt();
+                / weights.iter().sum::<f32>();
+            assert!(
+                (approached - live).abs() > 1e-3 * live,
+                "the approach scores nothing new: {approached} vs {live}"
+            );
             assert!(
                 largest < ROLLOUT_BOUND,
                 "the live free run reached {largest}, beyond the rollout's clamp: not comparable"
@@ -444,18 +482,21 @@ mod tests {
             let tt = Tensor::<3>::from_data(TensorData::new(tokens, [1, s, TOKEN_DIM]), &device);
             let mut rng = Rng::new(1);
             for backprop_steps in [None, Some(1), Some(3)] {
-                let run = FreeRun {
-                    at,
-                    horizon,
-                    temperature: 0.0,
-                    backprop_steps,
-                };
-                let trained: f32 =
-                    values(net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap())[0];
-                assert!(
-                    (trained - live).abs() < 1e-4 * live,
-                    "key_to_flow {key_to_flow}: rollout {trained} vs live {live}"
-                );
+                for (approach, expected) in [(0, live), (8, approached)] {
+                    let run = FreeRun {
+                        at,
+                        horizon,
+                        temperature: 0.0,
+                        backprop_steps,
+                        approach,
+                    };
+                    let trained: f32 =
+                        values(net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap())[0];
+                    assert!(
+                        (trained - expected).abs() < 1e-4 * expected,
+                        "key_to_flow {key_to_flow}, approach {approach}: rollout {trained} vs live {expected}"
+                    );
+                }
             }
         }
     }

@@ -929,6 +929,7 @@ mod tests {
                     horizon: 6,
                     temperature: 0.0,
                     backprop_steps: None,
+                    approach: 0,
                 },
                 weight: 1.0,
                 noise_seed: 9,

@@ -97,6 +97,11 @@ pub struct TrainArgs {
     /// for: the bank `danced eval` scores is of those); 0 announces only their own.
     #[arg(long, default_value_t = 0.0)]
     pub rollout_foreign: f64,
+    /// Score the key-pose distance on the last N frames of each rollout too, weighted
+    /// 1 − g / N at g frames to go (with truncated back-propagation, the step onto the key
+    /// alone learns to jump there; this teaches an approach); 0 scores the key frame alone.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub rollout_approach: usize,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -531,6 +536,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     None => String::new(),
                 }
             ) + &option_if_set("--rollout-foreign", args.rollout_foreign)
+                + &option_if_set("--rollout-approach", args.rollout_approach as f64)
         } else {
             String::new()
         }
@@ -611,6 +617,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     horizon,
                     temperature: args.rollout_temperature,
                     backprop_steps: rollout_backprop(args),
+                    approach: args.rollout_approach,
                 },
                 weight: args.key_rollout as f32,
                 noise_seed: rng.next_u64(),
