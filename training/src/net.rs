@@ -253,12 +253,8 @@ impl Net {
                 return None;
             }
             let pose = pose.clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND);
-            let to_go = last - t;
-            let weight = if to_go == 0 {
-                1.0
-            } else {
-                1.0 - to_go as f32 / approach.max(1) as f32
-            };
+            // 1 on the key frame; with no approach, 0 or less before it.
+            let weight = 1.0 - (last - t) as f32 / approach.max(1) as f32;
             if weight > 0.0 {
                 let d = key_distance(pose.clone(), key.clone()).mul_scalar(weight);
                 scored = Some(match scored {

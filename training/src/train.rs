@@ -34,6 +34,16 @@ fn rotations(motion: &[f32], f: usize) -> &[f32] {
     &motion[f * P + ROTATIONS..][..KEY_ROT_DIM]
 }
 
+/// Puts `pose` (key rotations) in place of the key pose announced on tokens `at` to
+/// `at + horizon` of `batch`'s last sequence (`sequence` tokens long).
+fn announce_on_last(batch: &mut Batch, sequence: usize, at: usize, horizon: usize, pose: &[f32]) {
+    let first = batch.tokens.len() - sequence * TOKEN_DIM;
+    let announced = batch.tokens[first..].chunks_exact_mut(TOKEN_DIM);
+    for tok in announced.skip(at).take(horizon + 1) {
+        tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
+    }
+}
+
 /// 3x² − 2x³ of `x` clamped to [0, 1].
 fn smoothstep(x: f32) -> f32 {
     let x = x.clamp(0.0, 1.0);
@@ -404,7 +414,6 @@ impl Corpus {
     pub fn random_batch(&self, rng: &mut Rng, sequences: usize, key_drop: f64) -> Batch {
         let mut batch = Batch::default();
         let (s, l) = (self.sequence, self.config.lookahead);
-        let total = self.frames();
         for _ in 0..sequences {
             let dance = self.pick_dance(rng);
             let n = self.dances[dance].frames;
@@ -417,7 +426,7 @@ impl Corpus {
             // Drawn only when asked for, so runs without splicing keep their random stream.
             let donor = match key {
                 Some(_) if self.key_splice > 0.0 && rng.uniform() < self.key_splice => {
-                    Some(self.frame_at(rng.below(total)))
+                    Some(self.any_frame(rng))
                 }
                 _ => None,
             };
@@ -436,8 +445,13 @@ impl Corpus {
                     .partition_point(|&c| c <= pick)
                     .min(self.dances.len() - 1)
             }
-            None => self.frame_at(rng.below(self.frames())).0,
+            None => self.any_frame(rng).0,
         }
+    }
+
+    /// A (dance, frame) drawn uniformly from all the corpus' frames.
+    fn any_frame(&self, rng: &mut Rng) -> (usize, usize) {
+        self.frame_at(rng.below(self.frames()))
     }
 
     /// The seed clip of dance `dance` from frame `start`, raw (see
@@ -526,13 +540,9 @@ impl Corpus {
             self.push_sequence(&mut batch, dance, start, key, None, None);
             // Drawn only when asked for, so runs without foreign keys keep their random stream.
             if foreign > 0.0 && rng.uniform() < foreign {
-                let (other, frame) = self.frame_at(rng.below(self.frames()));
+                let (other, frame) = self.any_frame(rng);
                 let pose = rotations(&self.dances[other].motion, frame);
-                let first = batch.tokens.len() - s * TOKEN_DIM;
-                let announced = batch.tokens[first..].chunks_exact_mut(TOKEN_DIM);
-                for tok in announced.skip(at).take(horizon + 1) {
-                    tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
-                }
+                announce_on_last(&mut batch, s, at, horizon, pose);
             }
         }
         batch
@@ -553,11 +563,7 @@ impl Corpus {
             if key == ProbeKey::Foreign {
                 let other = &self.dances[(i + 1) % self.dances.len()];
                 let pose = rotations(&other.motion, kf.min(other.frames - 1));
-                let first = batch.tokens.len() - s * TOKEN_DIM;
-                let announced = batch.tokens[first..].chunks_exact_mut(TOKEN_DIM);
-                for tok in announced.skip(at).take(horizon + 1) {
-                    tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
-                }
+                announce_on_last(batch, s, at, horizon, pose);
             }
         })
     }
