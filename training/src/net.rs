@@ -51,6 +51,20 @@ pub struct FreeRun {
     pub approach: usize,
 }
 
+/// What [`Net::key_rollout`] produced.
+pub struct FreeRunOutcome {
+    /// Per sequence `[b]`, the weighted distance of the poses reached from the key (see
+    /// [`FreeRun::approach`]).
+    pub key_distance: Tensor<1>,
+    /// The tokens the free run fed the transformer, `[b, at + horizon + 1, TOKEN_DIM]`: the
+    /// batch's up to the announcement, then its own poses fed back (as they were fed: without
+    /// a gradient beyond `backprop_steps`).
+    pub tokens: Tensor<3>,
+    /// The poses sampled, one per token from the announcement on, `[b, horizon + 1,
+    /// MOTION_FEATURE_DIM]`, with their gradient.
+    pub poses: Tensor<3>,
+}
+
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
 /// [`AUX_HORIZONS`] frames ahead.
 #[derive(Module, Debug)]
@@ -187,16 +201,17 @@ impl Net {
     /// the live cache does. Returns the distance, per sequence `[b]`, between the rotations of
     /// the pose reached on the last step and the key the token at `at` announces (normalised
     /// units; Yang et al.'s key-pose loss, which their flow needed to reach a key: the one-step
-    /// likelihood gives no reason to). Poses fed back more than `backprop_steps` steps before
-    /// the last are constants (truncated back-propagation). None if the
-    /// flow has become numerically singular or a pose exploded (beyond ±[`ROLLOUT_EXPLODED`]).
+    /// likelihood gives no reason to), with the tokens fed and the poses sampled. Poses fed
+    /// back more than `backprop_steps` steps before the last are constants (truncated
+    /// back-propagation). None if the flow has become numerically singular or a pose exploded
+    /// (beyond ±[`ROLLOUT_EXPLODED`]).
     pub fn key_rollout(
         &self,
         tokens: Tensor<3>,
         styles: Option<Tensor<3>>,
         run: &FreeRun,
         rng: &mut model::neural::rng::Rng,
-    ) -> Option<Tensor<1>> {
+    ) -> Option<FreeRunOutcome> {
         let [b, s, _] = tokens.dims();
         let FreeRun {
             at,
@@ -215,6 +230,7 @@ impl Net {
         let mut seq: Vec<Tensor<3>> = (0..=at).map(|t| tokens.clone().narrow(1, t, 1)).collect();
         // The weighted sum of the distances scored so far, and the weights' sum.
         let mut scored: Option<(Tensor<1>, f32)> = None;
+        let mut poses = Vec::with_capacity(last + 1 - at);
         for t in at..=last {
             // The whole sequence so far, not the last window: each layer's keys and values
             // at the window's first tokens carry what those tokens attended to in turn (as
@@ -262,6 +278,7 @@ impl Net {
                     None => (d, weight),
                 });
             }
+            poses.push(pose.clone().reshape([b, 1, MOTION_FEATURE_DIM]));
             if t == last {
                 break;
             }
@@ -281,7 +298,50 @@ impl Net {
             ));
         }
         let (sum, weights) = scored?;
-        Some(sum.div_scalar(weights))
+        Some(FreeRunOutcome {
+            key_distance: sum.div_scalar(weights),
+            tokens: Tensor::cat(seq, 1),
+            poses: Tensor::cat(poses, 1),
+        })
+    }
+
+    /// Per sequence `[b]`, this network's mean NLL (nats per frame) of a free run's sampled
+    /// poses with the key pose hidden from it (key, count-down and flag zeroed, as on a token
+    /// without a key): how much the run looks like dancing to a network that does not know
+    /// where it is going. `before` `[b, ≥ at, MOTION_FEATURE_DIM]` are the targets of the
+    /// tokens before the announcement (scored, not counted); `styles` as for `key_rollout`.
+    pub fn keyless_nll(
+        &self,
+        run: &FreeRunOutcome,
+        styles: Option<Tensor<3>>,
+        before: Tensor<3>,
+    ) -> Tensor<1> {
+        let [b, w, _] = run.tokens.dims();
+        let steps = run.poses.dims()[1];
+        let at = w - steps;
+        let device = run.tokens.device();
+        let keyless = Tensor::cat(
+            vec![
+                run.tokens.clone().narrow(2, 0, KEY_AT),
+                Tensor::zeros([b, w, TOKEN_DIM - KEY_AT], &device),
+            ],
+            2,
+        );
+        let targets = if at == 0 {
+            run.poses.clone()
+        } else {
+            Tensor::cat(vec![before.narrow(1, 0, at), run.poses.clone()], 1)
+        };
+        let rows = styles.map(|st| {
+            let width = st.dims()[2];
+            st.narrow(1, 0, w).reshape([b * w, width])
+        });
+        self.score(keyless, rows, targets, None)
+            .next
+            .reshape([b, w])
+            .narrow(1, at, steps)
+            .mean_dim(1)
+            .reshape([b])
     }
 
     /// Data-dependent initialisation of the flow's actnorms from one batch.
@@ -440,6 +500,7 @@ mod tests {
             let mut pose = vec![0.0f32; MOTION_FEATURE_DIM];
             let mut largest = 0.0f32;
             let mut distances = Vec::new();
+            let mut sampled = Vec::new();
             for (i, tok) in tokens.chunks_exact(TOKEN_DIM).enumerate() {
                 let mut tok = tok.to_vec();
                 if i > at {
@@ -448,6 +509,7 @@ mod tests {
                 rt.push(&tok);
                 if i >= at {
                     rt.sample(&[0.0; MOTION_FEATURE_DIM], &mut pose);
+                    sampled.extend_from_slice(&pose);
                     largest = pose.iter().fold(largest, |m, v| m.max(v.abs()));
                     let d = pose[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
                         .iter()
@@ -486,8 +548,19 @@ mod tests {
                         backprop_steps,
                         approach,
                     };
-                    let trained: f32 =
-                        values(net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap())[0];
+                    let outcome = net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap();
+                    let poses = values(outcome.poses);
+                    assert_eq!(poses.len(), sampled.len());
+                    let worst = poses
+                        .iter()
+                        .zip(&sampled)
+                        .map(|(a, b)| (a - b).abs())
+                        .fold(0.0, f32::max);
+                    assert!(
+                        worst < 1e-4,
+                        "the rollout's poses differ from the live ones by {worst}"
+                    );
+                    let trained: f32 = values(outcome.key_distance)[0];
                     assert!(
                         (trained - expected).abs() < 1e-4 * expected,
                         "key_to_flow {key_to_flow}, approach {approach}: rollout {trained} vs live {expected}"
@@ -495,5 +568,91 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_keyless_nll_hides_the_key_and_scores_only_the_free_run() {
+        let c = NetConfig {
+            key_to_flow: true,
+            ..NetConfig::tiny()
+        };
+        let mut t = init_net(&c, 5);
+        t.perturb(6, 0.03);
+        let device = cpu_device();
+        let net = Net::load(&t, &c, &device).unwrap();
+        let (at, horizon) = (c.window - 1, 6);
+        let s = at + horizon + 1;
+        let mut r = Rng::new(3);
+        let mut tokens: Vec<f32> = (0..2 * s * TOKEN_DIM).map(|_| 0.5 * r.normal()).collect();
+        for (i, tok) in tokens.chunks_exact_mut(TOKEN_DIM).enumerate() {
+            tok[FLAG_AT] = f32::from(u8::from(i % s >= at));
+        }
+        let targets: Vec<f32> = (0..2 * s * MOTION_FEATURE_DIM)
+            .map(|_| 0.5 * r.normal())
+            .collect();
+        let tt = Tensor::<3>::from_data(TensorData::new(tokens, [2, s, TOKEN_DIM]), &device);
+        let before = Tensor::<3>::from_data(
+            TensorData::new(targets, [2, s, MOTION_FEATURE_DIM]),
+            &device,
+        );
+        let run = FreeRun {
+            at,
+            horizon,
+            temperature: 0.0,
+            backprop_steps: Some(1),
+            approach: 0,
+        };
+        let outcome = net.key_rollout(tt, None, &run, &mut Rng::new(1)).unwrap();
+        let scored = values(net.keyless_nll(&outcome, None, before.clone()));
+        // Teacher-forced by hand: the fed tokens with every key field zeroed, the free run's
+        // poses as the targets from the announcement on; only those rows counted.
+        let fed = values(outcome.tokens.clone());
+        let mut keyless = fed.clone();
+        for tok in keyless.chunks_exact_mut(TOKEN_DIM) {
+            tok[KEY_AT..].fill(0.0);
+        }
+        let mut targets = values(before.clone());
+        let poses = values(outcome.poses.clone());
+        for q in 0..2 {
+            for (g, pose) in poses[q * (horizon + 1) * MOTION_FEATURE_DIM..]
+                .chunks_exact(MOTION_FEATURE_DIM)
+                .take(horizon + 1)
+                .enumerate()
+            {
+                let row = (q * s + at + g) * MOTION_FEATURE_DIM;
+                targets[row..row + MOTION_FEATURE_DIM].copy_from_slice(pose);
+            }
+        }
+        let tensor3 =
+            |v: Vec<f32>, w: usize| Tensor::<3>::from_data(TensorData::new(v, [2, s, w]), &device);
+        let rows = values(
+            net.score(
+                tensor3(keyless, TOKEN_DIM),
+                None,
+                tensor3(targets.clone(), MOTION_FEATURE_DIM),
+                None,
+            )
+            .next,
+        );
+        for q in 0..2 {
+            let by_hand = rows[q * s + at..(q + 1) * s].iter().sum::<f32>() / (horizon + 1) as f32;
+            assert!(
+                (scored[q] - by_hand).abs() < 1e-4 * by_hand.abs().max(1.0),
+                "sequence {q}: {} vs {by_hand}",
+                scored[q]
+            );
+        }
+        // With the key visible the same poses score otherwise: the hiding is what is measured.
+        let seen = values(
+            net.score(
+                tensor3(fed, TOKEN_DIM),
+                None,
+                tensor3(targets, MOTION_FEATURE_DIM),
+                None,
+            )
+            .next,
+        );
+        let seen0 = seen[at..s].iter().sum::<f32>() / (horizon + 1) as f32;
+        assert!((seen0 - scored[0]).abs() > 1e-3, "{seen0} vs {}", scored[0]);
     }
 }

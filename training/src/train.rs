@@ -2,6 +2,7 @@
 //! ground-truth future) and an Adam step on the exact NLL of every position.
 
 use burn::grad_clipping::GradientClippingConfig;
+use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -651,6 +652,9 @@ pub struct KeyRollout {
     pub run: FreeRun,
     /// Weight of the key-pose loss beside the NLL.
     pub weight: f32,
+    /// Weight of the free run's key-hidden NLL under the trainer's frozen critic (see
+    /// [`Trainer::with_critic`]) beside the NLL; 0 (or no critic) adds none.
+    pub keyless: f32,
     /// Seed of the rollout's sampling noise.
     pub noise_seed: u64,
 }
@@ -661,6 +665,9 @@ pub struct Trainer {
     optim: ModuleOptimizer,
     device: Device,
     model: NeuralModel,
+    /// A frozen copy of the starting weights that scores the key-pose rollouts' poses with
+    /// the key hidden ([`KeyRollout::keyless`]).
+    critic: Option<Net>,
 }
 
 /// What one [`Trainer::step`] scored.
@@ -671,6 +678,9 @@ pub struct StepLoss {
     /// The rollout's key-pose distance (normalised), None without a rollout or when it
     /// exploded or broke and was not scored.
     pub key_error: Option<f32>,
+    /// The critic's key-hidden NLL of the rollout's poses (nats per frame), None without a
+    /// critic or a scored rollout.
+    pub keyless_nll: Option<f32>,
 }
 
 impl Trainer {
@@ -686,7 +696,18 @@ impl Trainer {
             optim,
             device,
             model,
+            critic: None,
         })
+    }
+
+    /// Keeps a frozen copy of the current weights as the critic of the key-pose rollouts: the
+    /// approach to a key is penalised by how unlike dancing it looks to the network as it was
+    /// before it learnt to reach keys (the key loss alone taught a jump onto the key).
+    pub fn with_critic(mut self) -> Result<Self, WeightError> {
+        let tensors = self.model().tensors.clone();
+        let critic = Net::load(&tensors, &self.model.config, &self.device)?.no_grad();
+        self.critic = Some(critic);
+        Ok(self)
     }
 
     /// Data-dependent initialisation of the flow's actnorms (fresh models only, before the first step).
@@ -711,6 +732,7 @@ impl Trainer {
         let mut scored = StepLoss {
             nll: f32::NAN,
             key_error: None,
+            keyless_nll: None,
         };
         let Some(net) = self.net.take() else {
             return scored;
@@ -731,9 +753,9 @@ impl Trainer {
                 st.reshape([b, s, width])
             });
             let mut rng = Rng::new(r.noise_seed);
-            let reached = net.key_rollout(rt.tokens, styles, &r.run, &mut rng);
-            if let Some(error) = reached {
-                let error = error.mean();
+            let reached = net.key_rollout(rt.tokens, styles.clone(), &r.run, &mut rng);
+            if let Some(outcome) = reached {
+                let error = outcome.key_distance.clone().mean();
                 // A free run that broke (non-finite) teaches nothing; the NLL still counts.
                 scored.key_error = values(error.clone())
                     .first()
@@ -741,6 +763,16 @@ impl Trainer {
                     .filter(|e| e.is_finite());
                 if scored.key_error.is_some() {
                     loss = loss + error.mul_scalar(r.weight);
+                    if let Some(critic) = self.critic.as_ref().filter(|_| r.keyless > 0.0) {
+                        let nll = critic.keyless_nll(&outcome, styles, rt.targets).mean();
+                        scored.keyless_nll = values(nll.clone())
+                            .first()
+                            .copied()
+                            .filter(|v| v.is_finite());
+                        if scored.keyless_nll.is_some() {
+                            loss = loss + nll.mul_scalar(r.keyless);
+                        }
+                    }
                 }
             }
         }
@@ -789,7 +821,7 @@ mod tests {
     use super::*;
     use model::neural::file::TrainingSummary;
     use model::neural::runtime::Runtime;
-    use model::neural::tensors::init_net;
+    use model::neural::tensors::{NamedTensors, init_net};
 
     /// A smooth, periodic "dance" of 200 frames with music that carries its phase.
     fn periodic_dance() -> (Vec<[f32; P]>, Vec<[f32; M]>) {
@@ -938,6 +970,7 @@ mod tests {
                     approach: 0,
                 },
                 weight: 1.0,
+                keyless: 0.0,
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
@@ -952,6 +985,72 @@ mod tests {
         }
         let after = rollout(0.0, &mut tr);
         assert!(after < 0.5 * before, "key error {before} → {after}");
+    }
+
+    #[test]
+    fn the_keyless_critic_draws_the_free_run_towards_dancing_and_stays_frozen() {
+        let c = NetConfig::tiny();
+        let (motion, music) = periodic_dance();
+        let norm = Normalizer::fit(&motion, &music);
+        let corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
+        let mut tr = fresh_trainer(c, &norm);
+        let mut rng = Rng::new(2);
+        tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
+        // A critic that has learnt the dance a little.
+        for _ in 0..60 {
+            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
+        }
+        let start = tr.model().clone();
+        let at = c.window - 1;
+        // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
+        // off the dance, and only the critic's term can pull it back.
+        let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0);
+        let rollout = |keyless: f32, lr: f64, tr: &mut Trainer| {
+            let r = KeyRollout {
+                batch: batch.clone(),
+                run: FreeRun {
+                    at,
+                    horizon: 8,
+                    temperature: 0.0,
+                    backprop_steps: Some(1),
+                    approach: 4,
+                },
+                weight: 1.0,
+                keyless,
+                noise_seed: 9,
+            };
+            let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
+            let scored = tr.step(&b, Some(&r), lr, false);
+            assert!(scored.key_error.is_some(), "{scored:?}");
+            scored.keyless_nll
+        };
+        let trained = |keyless: f32| {
+            let mut tr = Trainer::new(start.clone()).unwrap().with_critic().unwrap();
+            let before = rollout(1.0, 0.0, &mut tr).expect("the critic scores the free run");
+            for _ in 0..60 {
+                rollout(keyless, 3e-3, &mut tr);
+            }
+            let after = rollout(1.0, 0.0, &mut tr).expect("the critic scores the free run");
+            let mut frozen = NamedTensors::default();
+            tr.critic.as_ref().unwrap().store(&mut frozen);
+            assert!(!frozen.map.is_empty());
+            for (name, value) in &frozen.map {
+                assert_eq!(
+                    Some(value),
+                    start.tensors.map.get(name),
+                    "the critic's {name} moved"
+                );
+            }
+            (before, after)
+        };
+        // The foreign key pulls the run off the dance either way (the NLL rises from the
+        // start); the critic's term holds it nearer.
+        let (before, with_critic) = trained(1.0);
+        let (_, key_alone) = trained(0.0);
+        assert!(
+            with_critic < key_alone - 0.5,
+            "the free run's key-hidden NLL: {before} at the start, {with_critic} trained with the critic, {key_alone} without"
+        );
     }
 
     #[test]

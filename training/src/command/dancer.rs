@@ -102,6 +102,12 @@ pub struct TrainArgs {
     /// alone learns to jump there; this teaches an approach); 0 scores the key frame alone.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub rollout_approach: usize,
+    /// Weight of the key-pose rollouts' NLL under a frozen copy of the weights training
+    /// resumed from, with the key hidden from that copy (nats per frame): the approach to a
+    /// key must still look like dancing to a dancer that does not know where it is going;
+    /// 0 keeps no copy.
+    #[arg(long, default_value_t = 0.0, requires = "resume")]
+    pub rollout_keyless: f64,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -537,6 +543,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 }
             ) + &option_if_set("--rollout-foreign", args.rollout_foreign)
                 + &option_if_set("--rollout-approach", args.rollout_approach as f64)
+                + &option_if_set("--rollout-keyless", args.rollout_keyless)
         } else {
             String::new()
         }
@@ -555,6 +562,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         format!("{}; then --resume: {recipe}", previous.recipe)
     };
     let mut trainer = Trainer::new(model)?;
+    if args.rollout_keyless > 0.0 {
+        trainer = trainer.with_critic()?;
+    }
     let mut rng = Rng::new(args.seed.wrapping_add(previous.steps));
     if fresh {
         trainer.data_init(&corpus.random_batch(&mut rng, 64, args.key_drop));
@@ -571,6 +581,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let mut step: u64 = 0;
     let mut smoothed = f64::NAN;
     let mut key_error = f64::NAN;
+    let mut keyless_nll = f64::NAN;
     let mut skipped_rollouts = 0u64;
     let mut bad_steps = 0;
     let mut last_val = if val.is_empty() {
@@ -620,6 +631,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     approach: args.rollout_approach,
                 },
                 weight: args.key_rollout as f32,
+                keyless: args.rollout_keyless as f32,
                 noise_seed: rng.next_u64(),
             }
         });
@@ -628,6 +640,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         skipped_rollouts += u64::from(rollout.is_some() && scored.key_error.is_none());
         if let Some(e) = scored.key_error {
             key_error = running_mean(key_error, f64::from(e));
+        }
+        if let Some(e) = scored.keyless_nll {
+            keyless_nll = running_mean(keyless_nll, f64::from(e));
         }
         bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
         if bad_steps >= 20 {
@@ -652,7 +667,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             checkpoint(&mut trainer, step, last_val, secs)?;
             // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
             let line = format!(
-                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}",
+                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}{}",
                 step / steps_per_epoch,
                 last_val.map_or("-".into(), |v| format!("{v:.2}")),
                 if key_error.is_nan() {
@@ -660,6 +675,13 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 } else {
                     format!(
                         ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts exploded, not scored)"
+                    )
+                },
+                if keyless_nll.is_nan() {
+                    String::new()
+                } else {
+                    format!(
+                        ", the rollouts' key-hidden NLL under the frozen start {keyless_nll:.2}"
                     )
                 }
             );
