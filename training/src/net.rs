@@ -305,8 +305,8 @@ impl Net {
         })
     }
 
-    /// Per sequence `[b]`, this network's mean NLL (nats per frame) of a free run's sampled
-    /// poses with the key pose hidden from it (key, count-down and flag zeroed, as on a token
+    /// Per sequence and step `[b, horizon + 1]`, this network's NLL (nats) of a free run's
+    /// sampled poses with the key pose hidden from it (key, count-down and flag zeroed, as on a token
     /// without a key): how much the run looks like dancing to a network that does not know
     /// where it is going. `before` `[b, ≥ at, MOTION_FEATURE_DIM]` are the targets of the
     /// tokens before the announcement (scored, not counted); `styles` as for `key_rollout`.
@@ -315,7 +315,7 @@ impl Net {
         run: &FreeRunOutcome,
         styles: Option<Tensor<3>>,
         before: Tensor<3>,
-    ) -> Tensor<1> {
+    ) -> Tensor<2> {
         let [b, w, _] = run.tokens.dims();
         let steps = run.poses.dims()[1];
         let at = w - steps;
@@ -340,8 +340,6 @@ impl Net {
             .next
             .reshape([b, w])
             .narrow(1, at, steps)
-            .mean_dim(1)
-            .reshape([b])
     }
 
     /// Data-dependent initialisation of the flow's actnorms from one batch.
@@ -603,7 +601,7 @@ mod tests {
             approach: 0,
         };
         let outcome = net.key_rollout(tt, None, &run, &mut Rng::new(1)).unwrap();
-        let scored = values(net.keyless_nll(&outcome, None, before.clone()));
+        let scored = values(net.keyless_nll(&outcome, None, before.clone()).mean_dim(1));
         // Teacher-forced by hand: the fed tokens with every key field zeroed, the free run's
         // poses as the targets from the announcement on; only those rows counted.
         let fed = values(outcome.tokens.clone());

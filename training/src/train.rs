@@ -655,6 +655,10 @@ pub struct KeyRollout {
     /// Weight of the free run's key-hidden NLL under the trainer's frozen critic (see
     /// [`Trainer::with_critic`]) beside the NLL; 0 (or no critic) adds none.
     pub keyless: f32,
+    /// Frames the critic finds at least this likely (NLL in nats at or below it, e.g. the
+    /// data's own) cost nothing: the critic objects to what does not look like dancing and
+    /// does not reward the free run for being likelier than dancing.
+    pub keyless_floor: f32,
     /// Seed of the rollout's sampling noise.
     pub noise_seed: u64,
 }
@@ -764,12 +768,13 @@ impl Trainer {
                 if scored.key_error.is_some() {
                     loss = loss + error.mul_scalar(r.weight);
                     if let Some(critic) = self.critic.as_ref().filter(|_| r.keyless > 0.0) {
-                        let nll = critic.keyless_nll(&outcome, styles, rt.targets).mean();
-                        scored.keyless_nll = values(nll.clone())
+                        let frames = critic.keyless_nll(&outcome, styles, rt.targets);
+                        scored.keyless_nll = values(frames.clone().mean())
                             .first()
                             .copied()
                             .filter(|v| v.is_finite());
                         if scored.keyless_nll.is_some() {
+                            let nll = frames.clamp_min(r.keyless_floor).mean();
                             loss = loss + nll.mul_scalar(r.keyless);
                         }
                     }
@@ -971,6 +976,7 @@ mod tests {
                 },
                 weight: 1.0,
                 keyless: 0.0,
+                keyless_floor: f32::MIN,
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
@@ -1005,7 +1011,7 @@ mod tests {
         // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
         // off the dance, and only the critic's term can pull it back.
         let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0);
-        let rollout = |keyless: f32, lr: f64, tr: &mut Trainer| {
+        let rollout = |keyless: f32, floor: f32, lr: f64, tr: &mut Trainer| {
             let r = KeyRollout {
                 batch: batch.clone(),
                 run: FreeRun {
@@ -1017,6 +1023,7 @@ mod tests {
                 },
                 weight: 1.0,
                 keyless,
+                keyless_floor: floor,
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
@@ -1024,13 +1031,15 @@ mod tests {
             assert!(scored.key_error.is_some(), "{scored:?}");
             scored.keyless_nll
         };
-        let trained = |keyless: f32| {
+        let trained = |keyless: f32, floor: f32| {
             let mut tr = Trainer::new(start.clone()).unwrap().with_critic().unwrap();
-            let before = rollout(1.0, 0.0, &mut tr).expect("the critic scores the free run");
+            let before =
+                rollout(1.0, f32::MIN, 0.0, &mut tr).expect("the critic scores the free run");
             for _ in 0..60 {
-                rollout(keyless, 3e-3, &mut tr);
+                rollout(keyless, floor, 3e-3, &mut tr);
             }
-            let after = rollout(1.0, 0.0, &mut tr).expect("the critic scores the free run");
+            let after =
+                rollout(1.0, f32::MIN, 0.0, &mut tr).expect("the critic scores the free run");
             let mut frozen = NamedTensors::default();
             tr.critic.as_ref().unwrap().store(&mut frozen);
             assert!(!frozen.map.is_empty());
@@ -1045,12 +1054,16 @@ mod tests {
         };
         // The foreign key pulls the run off the dance either way (the NLL rises from the
         // start); the critic's term holds it nearer.
-        let (before, with_critic) = trained(1.0);
-        let (_, key_alone) = trained(0.0);
+        let (before, with_critic) = trained(1.0, f32::MIN);
+        let (_, key_alone) = trained(0.0, f32::MIN);
         assert!(
             with_critic < key_alone - 0.5,
             "the free run's key-hidden NLL: {before} at the start, {with_critic} trained with the critic, {key_alone} without"
         );
+        // Frames at or below the floor cost nothing: with the floor above every frame's NLL
+        // the critic teaches nothing.
+        let (_, floored) = trained(1.0, 1e6);
+        assert_eq!(floored, key_alone, "a critic below its floor still taught");
     }
 
     #[test]

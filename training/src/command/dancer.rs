@@ -108,6 +108,16 @@ pub struct TrainArgs {
     /// 0 keeps no copy.
     #[arg(long, default_value_t = 0.0, requires = "resume")]
     pub rollout_keyless: f64,
+    /// Frames of the rollouts the frozen copy finds at least this likely (NLL in nats per
+    /// frame at or below it: e.g. the starting validation NLL, the data's own) cost nothing,
+    /// so the free run is not rewarded for being likelier than dancing; default: no floor.
+    #[arg(
+        long,
+        value_name = "NATS",
+        requires = "rollout_keyless",
+        allow_hyphen_values = true
+    )]
+    pub rollout_keyless_floor: Option<f64>,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -544,6 +554,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             ) + &option_if_set("--rollout-foreign", args.rollout_foreign)
                 + &option_if_set("--rollout-approach", args.rollout_approach as f64)
                 + &option_if_set("--rollout-keyless", args.rollout_keyless)
+                + &args
+                    .rollout_keyless_floor
+                    .map_or(String::new(), |f| format!(" --rollout-keyless-floor {f}"))
         } else {
             String::new()
         }
@@ -632,6 +645,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 },
                 weight: args.key_rollout as f32,
                 keyless: args.rollout_keyless as f32,
+                keyless_floor: args.rollout_keyless_floor.map_or(f32::MIN, |f| f as f32),
                 noise_seed: rng.next_u64(),
             }
         });
