@@ -78,19 +78,33 @@ fn damaged_model_file_is_named_in_the_error() {
 }
 
 #[test]
-fn shipped_model_dances_the_demo_song_without_held_frames() {
-    let (poses, held) = dance_to_demo(30.0, 0.5, 3);
-    assert_eq!(held, 0);
-    assert!(poses.iter().all(Pose::is_finite));
+fn shipped_model_dances_the_demo_song_with_hardly_a_held_frame() {
+    // A held frame (a sample the flow blew up, replaced by the last good pose) is a safety
+    // net acting: rare, counted, never a freeze. Over 12 seeds at T = 0.5 and 1 (18 000
+    // frames) the previous model held 8, the current 1; more than 1 in 1 000 is a regression.
     let skeleton = Skeleton::default_adult();
-    let positions = skeleton.trajectory(&poses);
-    // Hips stay at a standing dancer's height (the rig's hips are at 0.93 m).
-    for f in positions.chunks_exact(JOINT_COUNT) {
-        assert!((0.6..1.3).contains(&f[0].y), "hips at {} m", f[0].y);
+    let mut held = 0;
+    let mut frames = 0;
+    for seed in 1..=12 {
+        for temperature in [0.5, 1.0] {
+            let (poses, h) = dance_to_demo(30.0, temperature, seed);
+            assert!(poses.iter().all(Pose::is_finite));
+            held += h;
+            frames += poses.len() as u64;
+            let positions = skeleton.trajectory(&poses);
+            // Hips stay at a standing dancer's height (the rig's hips are at 0.93 m).
+            for f in positions.chunks_exact(JOINT_COUNT) {
+                assert!((0.6..1.3).contains(&f[0].y), "hips at {} m", f[0].y);
+            }
+            let track = JointTrack::new(&positions, JOINT_COUNT, 25.0).unwrap();
+            let freezes = detect_freezes(&track, FreezeParams::default()).unwrap();
+            assert_eq!(
+                freezes.freezes, 0,
+                "seed {seed}, T {temperature}: {freezes:?}"
+            );
+        }
     }
-    let track = JointTrack::new(&positions, JOINT_COUNT, 25.0).unwrap();
-    let freezes = detect_freezes(&track, FreezeParams::default()).unwrap();
-    assert_eq!(freezes.freezes, 0, "{freezes:?}");
+    assert!(held * 1000 <= frames, "{held} held of {frames} frames");
 }
 
 #[test]
