@@ -659,6 +659,9 @@ pub struct KeyRollout {
     /// data's own) cost nothing: the critic objects to what does not look like dancing and
     /// does not reward the free run for being likelier than dancing.
     pub keyless_floor: f32,
+    /// Whether the critic's weight fades over the approach (`run.approach` frames), to 0 on
+    /// the key frame: the key distance alone judges the last step onto the key.
+    pub keyless_fade: bool,
     /// Seed of the rollout's sampling noise.
     pub noise_seed: u64,
 }
@@ -774,7 +777,20 @@ impl Trainer {
                             .copied()
                             .filter(|v| v.is_finite());
                         if scored.keyless_nll.is_some() {
-                            let nll = frames.clamp_min(r.keyless_floor).mean();
+                            let mut nll = frames.clamp_min(r.keyless_floor);
+                            if r.keyless_fade {
+                                let [_, steps] = nll.dims();
+                                let n = r.run.approach.max(1) as f32;
+                                let fade: Vec<f32> = (0..steps)
+                                    .map(|j| ((steps - 1 - j) as f32 / n).min(1.0))
+                                    .collect();
+                                let fade = Tensor::<2>::from_data(
+                                    TensorData::new(fade, [1, steps]),
+                                    &self.device,
+                                );
+                                nll = nll * fade;
+                            }
+                            let nll = nll.mean();
                             loss = loss + nll.mul_scalar(r.keyless);
                         }
                     }
@@ -977,6 +993,7 @@ mod tests {
                 weight: 1.0,
                 keyless: 0.0,
                 keyless_floor: f32::MIN,
+                keyless_fade: false,
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
@@ -1011,7 +1028,7 @@ mod tests {
         // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
         // off the dance, and only the critic's term can pull it back.
         let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0);
-        let rollout = |keyless: f32, floor: f32, lr: f64, tr: &mut Trainer| {
+        let rollout = |keyless: f32, floor: f32, fade: bool, lr: f64, tr: &mut Trainer| {
             let r = KeyRollout {
                 batch: batch.clone(),
                 run: FreeRun {
@@ -1024,6 +1041,7 @@ mod tests {
                 weight: 1.0,
                 keyless,
                 keyless_floor: floor,
+                keyless_fade: fade,
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
@@ -1031,15 +1049,15 @@ mod tests {
             assert!(scored.key_error.is_some(), "{scored:?}");
             scored.keyless_nll
         };
-        let trained = |keyless: f32, floor: f32| {
+        let trained = |keyless: f32, floor: f32, fade: bool| {
             let mut tr = Trainer::new(start.clone()).unwrap().with_critic().unwrap();
-            let before =
-                rollout(1.0, f32::MIN, 0.0, &mut tr).expect("the critic scores the free run");
+            let before = rollout(1.0, f32::MIN, false, 0.0, &mut tr)
+                .expect("the critic scores the free run");
             for _ in 0..60 {
-                rollout(keyless, floor, 3e-3, &mut tr);
+                rollout(keyless, floor, fade, 3e-3, &mut tr);
             }
-            let after =
-                rollout(1.0, f32::MIN, 0.0, &mut tr).expect("the critic scores the free run");
+            let after = rollout(1.0, f32::MIN, false, 0.0, &mut tr)
+                .expect("the critic scores the free run");
             let mut frozen = NamedTensors::default();
             tr.critic.as_ref().unwrap().store(&mut frozen);
             assert!(!frozen.map.is_empty());
@@ -1054,16 +1072,22 @@ mod tests {
         };
         // The foreign key pulls the run off the dance either way (the NLL rises from the
         // start); the critic's term holds it nearer.
-        let (before, with_critic) = trained(1.0, f32::MIN);
-        let (_, key_alone) = trained(0.0, f32::MIN);
+        let (before, with_critic) = trained(1.0, f32::MIN, false);
+        let (_, key_alone) = trained(0.0, f32::MIN, false);
         assert!(
             with_critic < key_alone - 0.5,
             "the free run's key-hidden NLL: {before} at the start, {with_critic} trained with the critic, {key_alone} without"
         );
         // Frames at or below the floor cost nothing: with the floor above every frame's NLL
         // the critic teaches nothing.
-        let (_, floored) = trained(1.0, 1e6);
+        let (_, floored) = trained(1.0, 1e6, false);
         assert_eq!(floored, key_alone, "a critic below its floor still taught");
+        // Faded to nothing on the key frame, the critic still holds the way there.
+        let (_, faded) = trained(1.0, f32::MIN, true);
+        assert!(
+            faded < key_alone - 0.5 && faded != with_critic,
+            "faded {faded}, full {with_critic}, without {key_alone}"
+        );
     }
 
     #[test]

@@ -118,6 +118,11 @@ pub struct TrainArgs {
         allow_hyphen_values = true
     )]
     pub rollout_keyless_floor: Option<f64>,
+    /// Fade the frozen copy's weight over the approach (`--rollout-approach` frames) to 0 on
+    /// the key frame, so the dancing is judged on the way and the key distance alone judges
+    /// the arrival.
+    #[arg(long, requires = "rollout_keyless")]
+    pub rollout_keyless_fade: bool,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -557,6 +562,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 + &args
                     .rollout_keyless_floor
                     .map_or(String::new(), |f| format!(" --rollout-keyless-floor {f}"))
+                + if args.rollout_keyless_fade {
+                    " --rollout-keyless-fade"
+                } else {
+                    ""
+                }
         } else {
             String::new()
         }
@@ -646,6 +656,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 weight: args.key_rollout as f32,
                 keyless: args.rollout_keyless as f32,
                 keyless_floor: args.rollout_keyless_floor.map_or(f32::MIN, |f| f as f32),
+                keyless_fade: args.rollout_keyless_fade,
                 noise_seed: rng.next_u64(),
             }
         });
