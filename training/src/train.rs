@@ -652,18 +652,42 @@ pub struct KeyRollout {
     pub run: FreeRun,
     /// Weight of the key-pose loss beside the NLL.
     pub weight: f32,
-    /// Weight of the free run's key-hidden NLL under the trainer's frozen critic (see
-    /// [`Trainer::with_critic`]) beside the NLL; 0 (or no critic) adds none.
-    pub keyless: f32,
+    /// How the trainer's frozen critic scores the free run (see [`Trainer::with_critic`]);
+    /// None (or no critic) adds nothing.
+    pub critic: Option<CriticTerm>,
+    /// Seed of the rollout's sampling noise.
+    pub noise_seed: u64,
+}
+
+/// The frozen critic's term of a [`KeyRollout`]: its key-hidden NLL of the free run's poses.
+#[derive(Clone, Copy, Debug)]
+pub struct CriticTerm {
+    /// Weight of the term beside the NLL.
+    pub weight: f32,
     /// Frames the critic finds at least this likely (NLL in nats at or below it, e.g. the
     /// data's own) cost nothing: the critic objects to what does not look like dancing and
     /// does not reward the free run for being likelier than dancing.
-    pub keyless_floor: f32,
-    /// Whether the critic's weight fades over the approach (`run.approach` frames), to 0 on
-    /// the key frame: the key distance alone judges the last step onto the key.
-    pub keyless_fade: bool,
-    /// Seed of the rollout's sampling noise.
-    pub noise_seed: u64,
+    pub floor: f32,
+    /// Whether the critic's weight fades over the approach (`approach` frames of the
+    /// rollout), to 0 on the key frame: the key distance alone judges the last step onto it.
+    pub fade: bool,
+}
+
+impl CriticTerm {
+    /// The weighted loss of the critic's per-frame NLL `[b, steps]` (the last step the key
+    /// frame) of a rollout whose approach is `approach` frames.
+    fn loss(&self, frames: Tensor<2>, approach: usize, device: &Device) -> Tensor<1> {
+        let mut nll = frames.clamp_min(self.floor);
+        if self.fade {
+            let [_, steps] = nll.dims();
+            let n = approach.max(1) as f32;
+            let fade: Vec<f32> = (0..steps)
+                .map(|j| ((steps - 1 - j) as f32 / n).min(1.0))
+                .collect();
+            nll = nll * Tensor::<2>::from_data(TensorData::new(fade, [1, steps]), device);
+        }
+        nll.mean().mul_scalar(self.weight)
+    }
 }
 
 /// The network under training with its optimiser.
@@ -673,7 +697,7 @@ pub struct Trainer {
     device: Device,
     model: NeuralModel,
     /// A frozen copy of the starting weights that scores the key-pose rollouts' poses with
-    /// the key hidden ([`KeyRollout::keyless`]).
+    /// the key hidden ([`KeyRollout::critic`]).
     critic: Option<Net>,
 }
 
@@ -770,28 +794,14 @@ impl Trainer {
                     .filter(|e| e.is_finite());
                 if scored.key_error.is_some() {
                     loss = loss + error.mul_scalar(r.weight);
-                    if let Some(critic) = self.critic.as_ref().filter(|_| r.keyless > 0.0) {
+                    if let (Some(critic), Some(term)) = (&self.critic, r.critic) {
                         let frames = critic.keyless_nll(&outcome, styles, rt.targets);
                         scored.keyless_nll = values(frames.clone().mean())
                             .first()
                             .copied()
                             .filter(|v| v.is_finite());
                         if scored.keyless_nll.is_some() {
-                            let mut nll = frames.clamp_min(r.keyless_floor);
-                            if r.keyless_fade {
-                                let [_, steps] = nll.dims();
-                                let n = r.run.approach.max(1) as f32;
-                                let fade: Vec<f32> = (0..steps)
-                                    .map(|j| ((steps - 1 - j) as f32 / n).min(1.0))
-                                    .collect();
-                                let fade = Tensor::<2>::from_data(
-                                    TensorData::new(fade, [1, steps]),
-                                    &self.device,
-                                );
-                                nll = nll * fade;
-                            }
-                            let nll = nll.mean();
-                            loss = loss + nll.mul_scalar(r.keyless);
+                            loss = loss + term.loss(frames, r.run.approach, &self.device);
                         }
                     }
                 }
@@ -871,6 +881,19 @@ mod tests {
         Trainer::new(model).unwrap()
     }
 
+    /// A fresh tiny trainer initialised on [`periodic_dance`] (of style `style`), the corpus
+    /// of its 2-window sequences, and the generator as the initialisation left it.
+    fn periodic_trainer(style: Option<usize>) -> (NetConfig, Corpus, Trainer, Rng) {
+        let c = NetConfig::tiny();
+        let (motion, music) = periodic_dance();
+        let norm = Normalizer::fit(&motion, &music);
+        let corpus = Corpus::new(&[(&motion[..], &music[..], style)], &norm, &c, 2 * c.window);
+        let mut tr = fresh_trainer(c, &norm);
+        let mut rng = Rng::new(2);
+        tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
+        (c, corpus, tr, rng)
+    }
+
     #[test]
     fn a_network_given_the_key_in_its_flow_dances_as_before_until_trained() {
         let c = NetConfig {
@@ -906,18 +929,7 @@ mod tests {
 
     #[test]
     fn a_few_steps_lower_the_nll_of_a_simple_dance() {
-        let c = NetConfig::tiny();
-        let (motion, music) = periodic_dance();
-        let norm = Normalizer::fit(&motion, &music);
-        let corpus = Corpus::new(
-            &[(&motion[..], &music[..], Some(1))],
-            &norm,
-            &c,
-            2 * c.window,
-        );
-        let mut tr = fresh_trainer(c, &norm);
-        let mut rng = Rng::new(2);
-        tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
+        let (_, corpus, mut tr, mut rng) = periodic_trainer(Some(1));
         let val = corpus.all_sequences();
         let before = tr.evaluate(&val).unwrap();
         for _ in 0..30 {
@@ -971,13 +983,7 @@ mod tests {
 
     #[test]
     fn key_rollout_steps_pull_the_free_run_onto_the_key() {
-        let c = NetConfig::tiny();
-        let (motion, music) = periodic_dance();
-        let norm = Normalizer::fit(&motion, &music);
-        let corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
-        let mut tr = fresh_trainer(c, &norm);
-        let mut rng = Rng::new(2);
-        tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
+        let (c, corpus, mut tr, _) = periodic_trainer(None);
         let at = c.window - 1;
         let rollout = |lr: f64, tr: &mut Trainer| {
             // The same sequences every time, free-run at T = 0: a deterministic error.
@@ -991,9 +997,7 @@ mod tests {
                     approach: 0,
                 },
                 weight: 1.0,
-                keyless: 0.0,
-                keyless_floor: f32::MIN,
-                keyless_fade: false,
+                critic: None,
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
@@ -1012,13 +1016,7 @@ mod tests {
 
     #[test]
     fn the_keyless_critic_draws_the_free_run_towards_dancing_and_stays_frozen() {
-        let c = NetConfig::tiny();
-        let (motion, music) = periodic_dance();
-        let norm = Normalizer::fit(&motion, &music);
-        let corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
-        let mut tr = fresh_trainer(c, &norm);
-        let mut rng = Rng::new(2);
-        tr.data_init(&corpus.random_batch(&mut rng, 8, 0.5));
+        let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
         // A critic that has learnt the dance a little.
         for _ in 0..60 {
             tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
@@ -1028,7 +1026,7 @@ mod tests {
         // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
         // off the dance, and only the critic's term can pull it back.
         let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0);
-        let rollout = |keyless: f32, floor: f32, fade: bool, lr: f64, tr: &mut Trainer| {
+        let rollout = |critic: Option<CriticTerm>, lr: f64, tr: &mut Trainer| {
             let r = KeyRollout {
                 batch: batch.clone(),
                 run: FreeRun {
@@ -1039,9 +1037,7 @@ mod tests {
                     approach: 4,
                 },
                 weight: 1.0,
-                keyless,
-                keyless_floor: floor,
-                keyless_fade: fade,
+                critic,
                 noise_seed: 9,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
@@ -1049,15 +1045,19 @@ mod tests {
             assert!(scored.key_error.is_some(), "{scored:?}");
             scored.keyless_nll
         };
-        let trained = |keyless: f32, floor: f32, fade: bool| {
+        // Measured by the critic's full term (at learning rate 0 it teaches nothing).
+        let full = CriticTerm {
+            weight: 1.0,
+            floor: f32::MIN,
+            fade: false,
+        };
+        let trained = |critic: Option<CriticTerm>| {
             let mut tr = Trainer::new(start.clone()).unwrap().with_critic().unwrap();
-            let before = rollout(1.0, f32::MIN, false, 0.0, &mut tr)
-                .expect("the critic scores the free run");
+            let before = rollout(Some(full), 0.0, &mut tr).expect("the critic scores the free run");
             for _ in 0..60 {
-                rollout(keyless, floor, fade, 3e-3, &mut tr);
+                rollout(critic, 3e-3, &mut tr);
             }
-            let after = rollout(1.0, f32::MIN, false, 0.0, &mut tr)
-                .expect("the critic scores the free run");
+            let after = rollout(Some(full), 0.0, &mut tr).expect("the critic scores the free run");
             let mut frozen = NamedTensors::default();
             tr.critic.as_ref().unwrap().store(&mut frozen);
             assert!(!frozen.map.is_empty());
@@ -1072,18 +1072,18 @@ mod tests {
         };
         // The foreign key pulls the run off the dance either way (the NLL rises from the
         // start); the critic's term holds it nearer.
-        let (before, with_critic) = trained(1.0, f32::MIN, false);
-        let (_, key_alone) = trained(0.0, f32::MIN, false);
+        let (before, with_critic) = trained(Some(full));
+        let (_, key_alone) = trained(None);
         assert!(
             with_critic < key_alone - 0.5,
             "the free run's key-hidden NLL: {before} at the start, {with_critic} trained with the critic, {key_alone} without"
         );
         // Frames at or below the floor cost nothing: with the floor above every frame's NLL
         // the critic teaches nothing.
-        let (_, floored) = trained(1.0, 1e6, false);
+        let (_, floored) = trained(Some(CriticTerm { floor: 1e6, ..full }));
         assert_eq!(floored, key_alone, "a critic below its floor still taught");
         // Faded to nothing on the key frame, the critic still holds the way there.
-        let (_, faded) = trained(1.0, f32::MIN, true);
+        let (_, faded) = trained(Some(CriticTerm { fade: true, ..full }));
         assert!(
             faded < key_alone - 0.5 && faded != with_critic,
             "faded {faded}, full {with_critic}, without {key_alone}"

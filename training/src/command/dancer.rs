@@ -18,7 +18,7 @@ use model::neural::token::Normalizer;
 
 use crate::net::FreeRun;
 use crate::train::{
-    Batch, Corpus, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
+    Batch, Corpus, CriticTerm, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
 };
 
 /// Options of `danced-train dancer`.
@@ -654,9 +654,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     approach: args.rollout_approach,
                 },
                 weight: args.key_rollout as f32,
-                keyless: args.rollout_keyless as f32,
-                keyless_floor: args.rollout_keyless_floor.map_or(f32::MIN, |f| f as f32),
-                keyless_fade: args.rollout_keyless_fade,
+                critic: (args.rollout_keyless > 0.0).then(|| CriticTerm {
+                    weight: args.rollout_keyless as f32,
+                    floor: args.rollout_keyless_floor.map_or(f32::MIN, |f| f as f32),
+                    fade: args.rollout_keyless_fade,
+                }),
                 noise_seed: rng.next_u64(),
             }
         });
