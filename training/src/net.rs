@@ -63,6 +63,69 @@ pub struct FreeRunOutcome {
     /// The poses sampled, one per token from the announcement on, `[b, horizon + 1,
     /// MOTION_FEATURE_DIM]`, with their gradient.
     pub poses: Tensor<3>,
+    /// Per sequence, whether its free run stayed within ±[`ROLLOUT_EXPLODED`]; one that did
+    /// not went on from the mean pose, without a gradient, and is not to be scored.
+    pub kept: Vec<bool>,
+}
+
+/// `pose` `[b, width]` with the rows of sequences not `kept` (already, or now: beyond
+/// ±[`ROLLOUT_EXPLODED`]) replaced by the mean pose, 0, without a gradient; `kept` updated.
+/// None if a value is not finite or no sequence is kept.
+pub fn leave_out_exploded(pose: Tensor<2>, kept: &mut [bool]) -> Option<Tensor<2>> {
+    let [b, width] = pose.dims();
+    let largest = crate::layers::values(pose.clone().abs().max_dim(1));
+    if largest.len() != b || kept.len() != b || largest.iter().any(|m| !m.is_finite()) {
+        return None;
+    }
+    for (k, m) in kept.iter_mut().zip(&largest) {
+        *k &= *m <= ROLLOUT_EXPLODED;
+    }
+    if !kept.iter().any(|k| *k) {
+        return None;
+    }
+    if kept.iter().all(|k| *k) {
+        return Some(pose);
+    }
+    let lost: Vec<bool> = kept
+        .iter()
+        .flat_map(|&k| std::iter::repeat_n(!k, width))
+        .collect();
+    let lost = Tensor::<2, burn::tensor::Bool>::from_data(
+        burn::tensor::TensorData::new(lost, [b, width]),
+        &pose.device(),
+    );
+    Some(pose.mask_fill(lost, 0.0))
+}
+
+impl FreeRunOutcome {
+    /// How many sequences exploded and are not to be scored.
+    pub fn exploded(&self) -> usize {
+        self.kept.iter().filter(|k| !**k).count()
+    }
+
+    /// The mean over the kept sequences of `per_sequence` `[b, …]` (rows of the exploded ones
+    /// weigh nothing).
+    pub fn kept_mean<const D: usize>(&self, per_sequence: Tensor<D>) -> Tensor<1> {
+        let dims = per_sequence.dims();
+        let device = per_sequence.device();
+        let per_row: usize = dims[1..].iter().product();
+        let kept = self.kept.iter().filter(|k| **k).count().max(1);
+        let weights: Vec<f32> = self
+            .kept
+            .iter()
+            .map(|&k| {
+                if k {
+                    1.0 / (kept * per_row) as f32
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let mut shape = [1; D];
+        shape[0] = dims[0];
+        let w = Tensor::<D>::from_data(burn::tensor::TensorData::new(weights, shape), &device);
+        (per_sequence * w).sum()
+    }
 }
 
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
@@ -203,8 +266,10 @@ impl Net {
     /// units; Yang et al.'s key-pose loss, which their flow needed to reach a key: the one-step
     /// likelihood gives no reason to), with the tokens fed and the poses sampled. Poses fed
     /// back more than `backprop_steps` steps before the last are constants (truncated
-    /// back-propagation). None if the flow has become numerically singular or a pose exploded
-    /// (beyond ±[`ROLLOUT_EXPLODED`]).
+    /// back-propagation). A sequence whose pose explodes (beyond ±[`ROLLOUT_EXPLODED`]) goes on
+    /// from the mean pose, without a gradient, and is marked not [`FreeRunOutcome::kept`];
+    /// None if the flow has become numerically singular, a pose is not finite or every
+    /// sequence exploded.
     pub fn key_rollout(
         &self,
         tokens: Tensor<3>,
@@ -231,6 +296,7 @@ impl Net {
         // The weighted sum of the distances scored so far, and the weights' sum.
         let mut scored: Option<(Tensor<1>, f32)> = None;
         let mut poses = Vec::with_capacity(last + 1 - at);
+        let mut kept = vec![true; b];
         for t in at..=last {
             // The whole sequence so far, not the last window: each layer's keys and values
             // at the window's first tokens carry what those tokens attended to in turn (as
@@ -258,17 +324,12 @@ impl Net {
                 &device,
             );
             let pose = self.flow.inverse(z, ctx)?;
-            // A free run that exploded (the flow's inverse amplifies by up to 1/σ per coupling)
-            // is dropped whole: clamped, its zero gradient times an infinite one would put NaN
-            // in the weights. One that merely strayed is clamped as the live range clamp would.
-            let largest = crate::layers::values(pose.clone().abs().max());
-            if !largest
-                .first()
-                .is_some_and(|m| m.is_finite() && *m <= ROLLOUT_EXPLODED)
-            {
-                return None;
-            }
-            let pose = pose.clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND);
+            // A sequence that exploded (the flow's inverse amplifies by up to 1/σ per coupling)
+            // goes on from a constant: clamped, it would be scored as if it had danced. A
+            // non-finite pose drops the whole run: its zero gradient times an infinite one
+            // would put NaN in the weights. One that merely strayed is clamped as the live
+            // range clamp would.
+            let pose = leave_out_exploded(pose, &mut kept)?.clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND);
             // 1 on the key frame; with no approach, 0 or less before it.
             let weight = 1.0 - (last - t) as f32 / approach.max(1) as f32;
             if weight > 0.0 {
@@ -302,6 +363,7 @@ impl Net {
             key_distance: sum.div_scalar(weights),
             tokens: Tensor::cat(seq, 1),
             poses: Tensor::cat(poses, 1),
+            kept,
         })
     }
 
@@ -652,5 +714,51 @@ mod tests {
         );
         let seen0 = seen[at..s].iter().sum::<f32>() / (horizon + 1) as f32;
         assert!((seen0 - scored[0]).abs() > 1e-3, "{seen0} vs {}", scored[0]);
+    }
+
+    #[test]
+    fn an_exploded_sequence_is_left_out_without_a_gradient_and_a_broken_one_drops_the_run() {
+        let device = crate::device::training_device();
+        let rows = [0.5f32, -2.0, 2.0 * ROLLOUT_EXPLODED, 1.0, 0.25, -0.75];
+        let pose =
+            Tensor::<2>::from_data(TensorData::new(rows.to_vec(), [3, 2]), &device).require_grad();
+        let mut kept = vec![true; 3];
+        let out = leave_out_exploded(pose.clone(), &mut kept).expect("two sequences kept");
+        assert_eq!(kept, [true, false, true]);
+        assert_eq!(values(out.clone()), [0.5, -2.0, 0.0, 0.0, 0.25, -0.75]);
+        let grads = (out * 3.0).sum().backward();
+        let g = values(pose.grad(&grads).expect("a gradient"));
+        assert_eq!(g, [3.0, 3.0, 0.0, 0.0, 3.0, 3.0]);
+        // Once left out a sequence stays out, however it dances on.
+        let again = Tensor::<2>::from_data(TensorData::new(vec![0.1f32; 6], [3, 2]), &device);
+        leave_out_exploded(again, &mut kept).expect("kept");
+        assert_eq!(kept, [true, false, true]);
+        // Not finite anywhere, or nothing left: the whole run is dropped.
+        let broken = Tensor::<2>::from_data(
+            TensorData::new(vec![0.0, f32::NAN, 0.0, 0.0, 0.0, 0.0], [3, 2]),
+            &device,
+        );
+        assert!(leave_out_exploded(broken, &mut [true; 3]).is_none());
+        let lost = Tensor::<2>::from_data(TensorData::new(vec![1e9f32; 6], [3, 2]), &device);
+        assert!(leave_out_exploded(lost, &mut [true; 3]).is_none());
+    }
+
+    #[test]
+    fn the_kept_mean_weighs_only_the_kept_sequences() {
+        let device = cpu_device();
+        let outcome = FreeRunOutcome {
+            key_distance: Tensor::zeros([3], &device),
+            tokens: Tensor::zeros([3, 1, 1], &device),
+            poses: Tensor::zeros([3, 1, 1], &device),
+            kept: vec![true, false, true],
+        };
+        assert_eq!(outcome.exploded(), 1);
+        let d = Tensor::<1>::from_data(TensorData::new(vec![1.0f32, 1e6, 3.0], [3]), &device);
+        assert_eq!(values(outcome.kept_mean(d)), [2.0]);
+        let frames = Tensor::<2>::from_data(
+            TensorData::new(vec![1.0f32, 2.0, 1e6, 1e6, 3.0, 6.0], [3, 2]),
+            &device,
+        );
+        assert_eq!(values(outcome.kept_mean(frames)), [3.0]);
     }
 }

@@ -8,7 +8,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::device::{cpu_device, training_device};
 use crate::layers::values;
-use crate::net::{AUX_HORIZONS, FreeRun, Net};
+use crate::net::{AUX_HORIZONS, FreeRun, FreeRunOutcome, Net};
 use dsp::feature::FEATURE_DIM as M;
 use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
 use model::neural::config::NetConfig;
@@ -675,8 +675,14 @@ pub struct CriticTerm {
 
 impl CriticTerm {
     /// The weighted loss of the critic's per-frame NLL `[b, steps]` (the last step the key
-    /// frame) of a rollout whose approach is `approach` frames.
-    fn loss(&self, frames: Tensor<2>, approach: usize, device: &Device) -> Tensor<1> {
+    /// frame) of `run`, whose approach is `approach` frames (its exploded sequences not counted).
+    fn loss(
+        &self,
+        frames: Tensor<2>,
+        run: &FreeRunOutcome,
+        approach: usize,
+        device: &Device,
+    ) -> Tensor<1> {
         let mut nll = frames.clamp_min(self.floor);
         if self.fade {
             let [_, steps] = nll.dims();
@@ -686,8 +692,30 @@ impl CriticTerm {
                 .collect();
             nll = nll * Tensor::<2>::from_data(TensorData::new(fade, [1, steps]), device);
         }
-        nll.mean().mul_scalar(self.weight)
+        run.kept_mean(nll).mul_scalar(self.weight)
     }
+}
+
+/// Whether every gradient `grads` holds for `net`'s parameters is finite.
+fn gradients_finite(net: &Net, grads: &GradientsParams) -> bool {
+    struct Finite<'a> {
+        grads: &'a GradientsParams,
+        all: bool,
+    }
+    impl burn::module::ModuleVisitor for Finite<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+            if !self.all {
+                return;
+            }
+            if let Some(g) = self.grads.get::<D>(param.id) {
+                // The sum of |g| is finite only if every element is.
+                self.all = values(g.abs().sum()).first().is_some_and(|v| v.is_finite());
+            }
+        }
+    }
+    let mut v = Finite { grads, all: true };
+    net.visit(&mut v);
+    v.all
 }
 
 /// The network under training with its optimiser.
@@ -712,6 +740,10 @@ pub struct StepLoss {
     /// The critic's key-hidden NLL of the rollout's poses (nats per frame), None without a
     /// critic or a scored rollout.
     pub keyless_nll: Option<f32>,
+    /// Sequences of a scored rollout that exploded and were left out.
+    pub exploded_sequences: usize,
+    /// Whether the update was skipped because a gradient was not finite.
+    pub gradient_not_finite: bool,
 }
 
 impl Trainer {
@@ -764,6 +796,8 @@ impl Trainer {
             nll: f32::NAN,
             key_error: None,
             keyless_nll: None,
+            exploded_sequences: 0,
+            gradient_not_finite: false,
         };
         let Some(net) = self.net.take() else {
             return scored;
@@ -786,22 +820,23 @@ impl Trainer {
             let mut rng = Rng::new(r.noise_seed);
             let reached = net.key_rollout(rt.tokens, styles.clone(), &r.run, &mut rng);
             if let Some(outcome) = reached {
-                let error = outcome.key_distance.clone().mean();
+                let error = outcome.kept_mean(outcome.key_distance.clone());
                 // A free run that broke (non-finite) teaches nothing; the NLL still counts.
                 scored.key_error = values(error.clone())
                     .first()
                     .copied()
                     .filter(|e| e.is_finite());
                 if scored.key_error.is_some() {
+                    scored.exploded_sequences = outcome.exploded();
                     loss = loss + error.mul_scalar(r.weight);
                     if let (Some(critic), Some(term)) = (&self.critic, r.critic) {
                         let frames = critic.keyless_nll(&outcome, styles, rt.targets);
-                        scored.keyless_nll = values(frames.clone().mean())
+                        scored.keyless_nll = values(outcome.kept_mean(frames.clone()))
                             .first()
                             .copied()
                             .filter(|v| v.is_finite());
                         if scored.keyless_nll.is_some() {
-                            loss = loss + term.loss(frames, r.run.approach, &self.device);
+                            loss = loss + term.loss(frames, &outcome, r.run.approach, &self.device);
                         }
                     }
                 }
@@ -812,8 +847,16 @@ impl Trainer {
             self.net = Some(net);
             return scored;
         }
-        scored.nll = value;
         let grads = GradientsParams::from_grads(loss.backward(), &net);
+        // A finite loss can still have a non-finite gradient (zero times an infinite local
+        // derivative inside a sequence that was left out), and one NaN in Adam's moments
+        // would poison every weight from then on.
+        if !gradients_finite(&net, &grads) {
+            scored.gradient_not_finite = true;
+            self.net = Some(net);
+            return scored;
+        }
+        scored.nll = value;
         self.net = Some(self.optim.step(lr, net, grads));
         scored
     }
@@ -1283,5 +1326,20 @@ mod tests {
             let marked = seq.chunks_exact(4).filter(|r| r.contains(&1.0)).count();
             assert!(marked == 0 || marked == 16);
         }
+    }
+
+    #[test]
+    fn a_non_finite_gradient_is_caught_before_the_update() {
+        let (_, corpus, mut trainer, mut rng) = periodic_trainer(None);
+        let net = trainer.net.take().expect("a network");
+        let batch = corpus.random_batch(&mut rng, 2, 0.0);
+        let loss = || {
+            let t = tensors(&batch, &trainer.device);
+            net.score(t.tokens, t.styles, t.targets, None).next.mean()
+        };
+        let grads = GradientsParams::from_grads(loss().backward(), &net);
+        assert!(gradients_finite(&net, &grads));
+        let poisoned = GradientsParams::from_grads(loss().mul_scalar(f32::NAN).backward(), &net);
+        assert!(!gradients_finite(&net, &poisoned));
     }
 }

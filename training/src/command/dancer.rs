@@ -606,6 +606,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let mut key_error = f64::NAN;
     let mut keyless_nll = f64::NAN;
     let mut skipped_rollouts = 0u64;
+    let mut exploded_sequences = 0u64;
+    let mut gradient_skips = 0u64;
     let mut bad_steps = 0;
     let mut last_val = if val.is_empty() {
         None
@@ -665,6 +667,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         let scored = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux);
         let loss = f64::from(scored.nll);
         skipped_rollouts += u64::from(rollout.is_some() && scored.key_error.is_none());
+        exploded_sequences += scored.exploded_sequences as u64;
+        gradient_skips += u64::from(scored.gradient_not_finite);
         if let Some(e) = scored.key_error {
             key_error = running_mean(key_error, f64::from(e));
         }
@@ -694,14 +698,14 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             checkpoint(&mut trainer, step, last_val, secs)?;
             // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
             let line = format!(
-                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}{}",
+                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}{}{}",
                 step / steps_per_epoch,
                 last_val.map_or("-".into(), |v| format!("{v:.2}")),
                 if key_error.is_nan() {
                     String::new()
                 } else {
                     format!(
-                        ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts exploded, not scored)"
+                        ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts broke or all exploded, not scored; {exploded_sequences} exploded sequences left out of the others)"
                     )
                 },
                 if keyless_nll.is_nan() {
@@ -710,6 +714,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     format!(
                         ", the rollouts' key-hidden NLL under the frozen start {keyless_nll:.2}"
                     )
+                },
+                if gradient_skips == 0 {
+                    String::new()
+                } else {
+                    format!(", {gradient_skips} updates skipped for a non-finite gradient")
                 }
             );
             if pb.is_hidden() {
