@@ -698,24 +698,26 @@ impl CriticTerm {
 
 /// Whether every gradient `grads` holds for `net`'s parameters is finite.
 fn gradients_finite(net: &Net, grads: &GradientsParams) -> bool {
-    struct Finite<'a> {
+    /// The sum of every gradient's |g|, read back once: finite only if every element is.
+    struct AbsSum<'a> {
         grads: &'a GradientsParams,
-        all: bool,
+        sum: Option<Tensor<1>>,
     }
-    impl burn::module::ModuleVisitor for Finite<'_> {
+    impl burn::module::ModuleVisitor for AbsSum<'_> {
         fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
-            if !self.all {
-                return;
-            }
             if let Some(g) = self.grads.get::<D>(param.id) {
-                // The sum of |g| is finite only if every element is.
-                self.all = values(g.abs().sum()).first().is_some_and(|v| v.is_finite());
+                let s = g.abs().sum();
+                self.sum = Some(match self.sum.take() {
+                    Some(sum) => sum + s,
+                    None => s,
+                });
             }
         }
     }
-    let mut v = Finite { grads, all: true };
+    let mut v = AbsSum { grads, sum: None };
     net.visit(&mut v);
-    v.all
+    v.sum
+        .is_none_or(|s| values(s).first().is_some_and(|x| x.is_finite()))
 }
 
 /// The network under training with its optimiser.
