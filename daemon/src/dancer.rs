@@ -57,6 +57,9 @@ pub struct SourceSettings<'a> {
     /// Depth of the neural dancer's beat accent (`None`: its default,
     /// [`model::neural::dancer::BEAT_ACCENT`]).
     pub beat_accent: Option<f32>,
+    /// Share of a planted foot's slide the neural dancer's stance leg holds (`None`: its
+    /// default, [`model::foot_lock::DEFAULT_PLANT`]).
+    pub foot_plant: Option<f32>,
     /// Neural model file.
     pub model: Option<&'a Path>,
     /// Clip library file.
@@ -95,6 +98,9 @@ pub fn open_source(
             let mut d = neural_dancer(&load_model(settings.model)?, seed)?;
             if let Some(a) = settings.beat_accent {
                 d.set_beat_accent(a);
+            }
+            if let Some(p) = settings.foot_plant {
+                d.set_foot_plant(p);
             }
             if settings.network_only {
                 d.set_safety_nets(SafetyNets::NETWORK_ONLY);

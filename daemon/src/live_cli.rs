@@ -92,6 +92,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             library: config.dancer.library.as_deref(),
             // Live, the accent travels with the controls (set from the configuration at start).
             beat_accent: None,
+            foot_plant: Some(config.dancer.foot_plant),
         },
         config.dancer.seed,
     )?;

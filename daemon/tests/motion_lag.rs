@@ -18,6 +18,7 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
         model: None,
         library: None,
         beat_accent: None,
+        foot_plant: None,
     };
     let a = analyze_samples(
         "demo",

@@ -268,6 +268,7 @@ fn source_settings(kind: SourceKind, config: &Config) -> SourceSettings<'_> {
             None
         },
         beat_accent: Some(config.dancer.beat_accent),
+        foot_plant: Some(config.dancer.foot_plant),
     }
 }
 

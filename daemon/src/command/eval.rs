@@ -85,7 +85,10 @@ fn sources(
     fresh_noise.set_noise_correlation(0.0);
     sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
     let mut free_feet = crate::dancer::neural_dancer(model, o.seed)?;
-    free_feet.set_foot_lock(0.0);
+    free_feet.set_safety_nets(model::neural::safety::SafetyNets {
+        foot_lock: false,
+        ..model::neural::safety::SafetyNets::SHIPPED
+    });
     sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
     // The network alone: every safety net off but the non-finite guard.
     let mut alone = crate::dancer::neural_dancer(model, o.seed)?;

@@ -134,6 +134,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             let model = crate::dancer::load_model(config.dancer.model.as_deref())?;
             let mut d = crate::dancer::neural_dancer(&model, seed)?;
             d.set_beat_accent(config.dancer.beat_accent);
+            d.set_foot_plant(config.dancer.foot_plant);
             if *network_only {
                 d.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
             }
@@ -151,6 +152,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
                 model: config.dancer.model.as_deref(),
                 library: config.dancer.library.as_deref(),
                 beat_accent: Some(config.dancer.beat_accent),
+                foot_plant: Some(config.dancer.foot_plant),
                 network_only: *network_only,
             },
             seed,

@@ -250,6 +250,8 @@ pub struct DancerConfig {
     pub transition_beats: f32,
     /// Depth of the neural dancer's beat accent (0: the network's own timing).
     pub beat_accent: f32,
+    /// Share of a planted foot's slide the neural dancer's stance leg holds, 0–1.
+    pub foot_plant: f32,
     /// Dance style: `auto` (from the music's meter and tempo), `cha-cha`, `rumba`, `tango` or
     /// `waltz` (models trained before issue 21 have no style input and ignore it).
     pub style: String,
@@ -265,6 +267,7 @@ impl Default for DancerConfig {
             seed: 1,
             transition_beats: 1.0,
             beat_accent: model::neural::dancer::BEAT_ACCENT,
+            foot_plant: model::foot_lock::DEFAULT_PLANT,
             style: "auto".into(),
         }
     }
@@ -365,6 +368,10 @@ impl Config {
                 "dancer.beat_accent",
                 format!("= {a}: must be in {lo}..={hi}"),
             ));
+        }
+        let p = self.dancer.foot_plant;
+        if !(p.is_finite() && (0.0..=1.0).contains(&p)) {
+            return Err(bad("dancer.foot_plant", format!("= {p}: must be in 0..=1")));
         }
         if model::style::StyleRequest::parse(&self.dancer.style).is_none() {
             return Err(bad(
@@ -507,6 +514,20 @@ mod tests {
         assert_eq!(Config::default().dancer.style_request(), StyleRequest::Auto);
         let e = Config::parse("[dancer]\nstyle = \"polka\"\n", Path::new("x.toml")).unwrap_err();
         assert!(e.to_string().contains("dancer.style"), "{e}");
+    }
+
+    #[test]
+    fn foot_plant_is_checked() {
+        let c = Config::parse("[dancer]\nfoot_plant = 0.3\n", Path::new("x.toml")).unwrap();
+        assert_eq!(c.dancer.foot_plant, 0.3);
+        for bad in ["-0.1", "1.5", "nan"] {
+            let e = Config::parse(
+                &format!("[dancer]\nfoot_plant = {bad}\n"),
+                Path::new("x.toml"),
+            )
+            .unwrap_err();
+            assert!(e.to_string().contains("dancer.foot_plant"), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -189,7 +189,8 @@ impl NeuralDancer {
                 Skeleton::default_adult(),
                 FRAME_RATE as f32,
                 foot_lock::DEFAULT_STRENGTH,
-            ),
+            )
+            .with_plant(foot_lock::DEFAULT_PLANT),
             previous_raw: [0.0; MOTION_FEATURE_DIM],
             mean_speed_mps: 0.0,
             style_from_music: StyleFromMusic::new(),
@@ -236,6 +237,12 @@ impl NeuralDancer {
     /// [`foot_lock::DEFAULT_STRENGTH`]).
     pub fn set_foot_lock(&mut self, strength: f32) {
         self.foot_lock.set_strength(strength);
+    }
+
+    /// Sets the share of a planted toe's remaining drift the stance leg holds by bending (0:
+    /// the legs are never touched; default [`foot_lock::DEFAULT_PLANT`]).
+    pub fn set_foot_plant(&mut self, plant: f32) {
+        self.foot_lock.set_plant(plant);
     }
 
     /// Switches the safety nets on or off ([`SafetyNets::NETWORK_ONLY`]: the network alone);
@@ -421,11 +428,19 @@ impl MotionSource for NeuralDancer {
                     }
                 }
             }
-            let blend = self.nets.key_blend.then_some(self.key_blend_frames);
-            if let Some((ftg, frames)) = key.zip(blend).filter(|&(f, n)| f < n) {
+            // How far into a key pose's arrival this frame is (smoothstep over the blend's
+            // frames): the end blend's weight, and how much of a held foot lets go (a leg
+            // bent to hold its toe would bend the key pose too, blended or not).
+            let arrival = |frames: u32| {
+                key.filter(|&f| f < frames).map(|ftg| {
+                    let x = 1.0 - ftg as f32 / frames as f32;
+                    x * x * (3.0 - 2.0 * x)
+                })
+            };
+            let let_go = arrival(self.key_blend_frames.max(KEY_BLEND_FRAMES)).unwrap_or(0.0);
+            let blend = arrival(self.key_blend_frames).filter(|_| self.nets.key_blend);
+            if let Some(w) = blend {
                 self.counts.key_blended += 1;
-                let x = 1.0 - ftg as f32 / frames as f32;
-                let w = x * x * (3.0 - 2.0 * x);
                 // Both are heading-free 6D rotations; the decoder re-orthonormalises the
                 // blend. Fed back too, so the network sees itself arrive.
                 for (f, k) in self.features[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
@@ -448,7 +463,7 @@ impl MotionSource for NeuralDancer {
                 }
                 self.glide_left -= 1;
             }
-            if self.nets.foot_lock && self.foot_lock.process(out) {
+            if self.nets.foot_lock && self.foot_lock.process(out, 1.0 - let_go) {
                 self.counts.foot_locked += 1;
             }
             self.last_good = *out;
