@@ -32,6 +32,14 @@ pub const ROLLOUT_BOUND: f32 = 8.0;
 /// A key-pose rollout with a normalised value beyond ± this has exploded and is not scored.
 pub const ROLLOUT_EXPLODED: f32 = 1e3;
 
+/// A key-pose rollout's flow inverse stays finite, so an exploding sequence is left out instead
+/// of its infinities dropping the whole batch's rollout (a coupling's inverse gain of e^10 is
+/// far beyond a sampled pose's; values beyond ten times [`ROLLOUT_EXPLODED`] have exploded).
+pub const ROLLOUT_INVERSE_BOUND: crate::flow::InverseBound = crate::flow::InverseBound {
+    max_log_gain: 10.0,
+    max_value: 10.0 * ROLLOUT_EXPLODED,
+};
+
 /// Where and how [`Net::key_rollout`] free-runs.
 #[derive(Clone, Copy, Debug)]
 pub struct FreeRun {
@@ -323,7 +331,9 @@ impl Net {
                 burn::tensor::TensorData::new(noise, [b, MOTION_FEATURE_DIM]),
                 &device,
             );
-            let pose = self.flow.inverse(z, ctx)?;
+            let pose = self
+                .flow
+                .inverse_within(z, ctx, Some(ROLLOUT_INVERSE_BOUND))?;
             // A sequence that exploded (the flow's inverse amplifies by up to 1/σ per coupling)
             // goes on from a constant: clamped, it would be scored as if it had danced. A
             // non-finite pose drops the whole run: its zero gradient times an infinite one
