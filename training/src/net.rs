@@ -32,9 +32,10 @@ pub const ROLLOUT_BOUND: f32 = 8.0;
 /// A key-pose rollout with a normalised value beyond ± this has exploded and is not scored.
 pub const ROLLOUT_EXPLODED: f32 = 1e3;
 
-/// A key-pose rollout's flow inverse stays finite, so an exploding sequence is left out instead
-/// of its infinities dropping the whole batch's rollout (a coupling's inverse gain of e^10 is
-/// far beyond a sampled pose's; values beyond ten times [`ROLLOUT_EXPLODED`] have exploded).
+/// With [`FreeRun::bounded`] a key-pose rollout's flow inverse stays finite, so an exploding
+/// sequence is left out instead of its infinities dropping the whole batch's rollout (a
+/// coupling's inverse gain of e^10 is far beyond a sampled pose's; values beyond ten times
+/// [`ROLLOUT_EXPLODED`] have exploded).
 pub const ROLLOUT_INVERSE_BOUND: crate::flow::InverseBound = crate::flow::InverseBound {
     max_log_gain: 10.0,
     max_value: 10.0 * ROLLOUT_EXPLODED,
@@ -57,6 +58,8 @@ pub struct FreeRun {
     /// g frames to go (so the pose is drawn onto the key gradually, not in one step); 0
     /// scores the key frame alone.
     pub approach: usize,
+    /// Hold the flow's inverse within [`ROLLOUT_INVERSE_BOUND`] (see `--rollout-bounded`).
+    pub bounded: bool,
 }
 
 /// What [`Net::key_rollout`] produced.
@@ -292,6 +295,7 @@ impl Net {
             temperature,
             backprop_steps,
             approach,
+            bounded,
         } = *run;
         let last = (at + horizon).min(s - 1);
         let device = tokens.device();
@@ -331,9 +335,9 @@ impl Net {
                 burn::tensor::TensorData::new(noise, [b, MOTION_FEATURE_DIM]),
                 &device,
             );
-            let pose = self
-                .flow
-                .inverse_within(z, ctx, Some(ROLLOUT_INVERSE_BOUND))?;
+            let pose =
+                self.flow
+                    .inverse_within(z, ctx, bounded.then_some(ROLLOUT_INVERSE_BOUND))?;
             // A sequence that exploded (the flow's inverse amplifies by up to 1/σ per coupling)
             // goes on from a constant: clamped, it would be scored as if it had danced. A
             // non-finite pose drops the whole run: its zero gradient times an infinite one
@@ -609,7 +613,10 @@ mod tests {
             );
             let tt = Tensor::<3>::from_data(TensorData::new(tokens, [1, s, TOKEN_DIM]), &device);
             let mut rng = Rng::new(1);
-            for backprop_steps in [None, Some(1), Some(3)] {
+            let runs = [None, Some(1), Some(3)]
+                .into_iter()
+                .flat_map(|b| [(b, false), (b, true)]);
+            for (backprop_steps, bounded) in runs {
                 for (approach, expected) in [(0, live), (8, approached)] {
                     let run = FreeRun {
                         at,
@@ -617,6 +624,7 @@ mod tests {
                         temperature: 0.0,
                         backprop_steps,
                         approach,
+                        bounded,
                     };
                     let outcome = net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap();
                     let poses = values(outcome.poses);
@@ -671,6 +679,7 @@ mod tests {
             temperature: 0.0,
             backprop_steps: Some(1),
             approach: 0,
+            bounded: false,
         };
         let outcome = net.key_rollout(tt, None, &run, &mut Rng::new(1)).unwrap();
         let scored = values(net.keyless_nll(&outcome, None, before.clone()).mean_dim(1));

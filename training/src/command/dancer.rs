@@ -123,6 +123,12 @@ pub struct TrainArgs {
     /// the arrival.
     #[arg(long, requires = "rollout_keyless")]
     pub rollout_keyless_fade: bool,
+    /// Hold each rollout's flow inverse finite (`net::ROLLOUT_INVERSE_BOUND`), so a sequence
+    /// that explodes is left out instead of its infinities dropping the batch's whole rollout.
+    /// Off by default: one run of the shipped recipe with it (K2G) danced worse than the two
+    /// without it, more than a draw usually moves it.
+    #[arg(long, requires = "key_rollout")]
+    pub rollout_bounded: bool,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -567,6 +573,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 } else {
                     ""
                 }
+                + if args.rollout_bounded {
+                    " --rollout-bounded"
+                } else {
+                    ""
+                }
         } else {
             String::new()
         }
@@ -654,6 +665,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     temperature: args.rollout_temperature,
                     backprop_steps: rollout_backprop(args),
                     approach: args.rollout_approach,
+                    bounded: args.rollout_bounded,
                 },
                 weight: args.key_rollout as f32,
                 critic: (args.rollout_keyless > 0.0).then(|| CriticTerm {
