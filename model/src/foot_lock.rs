@@ -283,13 +283,7 @@ mod tests {
     /// behind: it would have to stretch).
     fn crouching_at(skeleton: &Skeleton, x: f32) -> Pose {
         let mut pose = skeleton.rest_pose();
-        for (upper, lower) in [
-            (Joint::LeftUpperLeg, Joint::LeftLowerLeg),
-            (Joint::RightUpperLeg, Joint::RightLowerLeg),
-        ] {
-            pose.set_rotation(upper, Quat::from_rotation_x(-0.3));
-            pose.set_rotation(lower, Quat::from_rotation_x(0.6));
-        }
+        crate::leg_ik::tests::bend_knees(&mut pose);
         let lowest = toes(skeleton, &pose)
             .iter()
             .map(|t| t.y)

@@ -77,7 +77,9 @@ pub fn reach_with_leg(
     let swing = Quat::from_rotation_arc(opened.normalize(), (target - hip).normalize());
     let new_hip_world = (swing * open_hip * rotations[upper.index()]).normalize();
     let new_knee_world = (swing * open_hip * open_knee * rotations[lower.index()]).normalize();
-    let parent = rotations[Joint::Hips.index()];
+    let parent = upper
+        .parent()
+        .map_or(Quat::IDENTITY, |p| rotations[p.index()]);
     let foot_world = rotations[foot.index()];
     let hip_local = (parent.inverse() * new_hip_world).normalize();
     let knee_local = (new_hip_world.inverse() * new_knee_world).normalize();
@@ -110,7 +112,7 @@ fn leg_below(upper: Joint) -> Option<(Joint, Joint, Joint)> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn fk(skeleton: &Skeleton, pose: &Pose) -> ([Vec3; JOINT_COUNT], [Quat; JOINT_COUNT]) {
@@ -120,10 +122,9 @@ mod tests {
         (p, r)
     }
 
-    /// A standing pose with both knees a little bent, the hips turned `yaw`.
-    fn bent(skeleton: &Skeleton, yaw: f32) -> Pose {
-        let mut pose = skeleton.rest_pose();
-        pose.set_rotation(Joint::Hips, Quat::from_rotation_y(yaw));
+    /// Bends both knees a little (thighs forward 0.3 rad, shins back 0.6 rad): a leg that
+    /// can reach a target a few centimetres off in any direction.
+    pub(crate) fn bend_knees(pose: &mut Pose) {
         for (upper, lower) in [
             (Joint::LeftUpperLeg, Joint::LeftLowerLeg),
             (Joint::RightUpperLeg, Joint::RightLowerLeg),
@@ -131,6 +132,13 @@ mod tests {
             pose.set_rotation(upper, Quat::from_rotation_x(-0.3));
             pose.set_rotation(lower, Quat::from_rotation_x(0.6));
         }
+    }
+
+    /// A standing pose with both knees a little bent, the hips turned `yaw`.
+    fn bent(skeleton: &Skeleton, yaw: f32) -> Pose {
+        let mut pose = skeleton.rest_pose();
+        pose.set_rotation(Joint::Hips, Quat::from_rotation_y(yaw));
+        bend_knees(&mut pose);
         pose
     }
 

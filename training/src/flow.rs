@@ -308,6 +308,16 @@ mod tests {
         Flow::load(&t, "f", c, &cpu_device()).unwrap()
     }
 
+    /// The flow most tests use: 6 dimensions, a 3-wide context, 8 steps.
+    fn six_by_eight() -> FlowConfig {
+        FlowConfig {
+            dim: 6,
+            context: 3,
+            hidden: 8,
+            steps: 8,
+        }
+    }
+
     fn random(rows: usize, cols: usize, seed: u64) -> (Vec<f32>, Tensor<2>) {
         let mut r = Rng::new(seed);
         let v: Vec<f32> = (0..rows * cols).map(|_| r.normal()).collect();
@@ -316,12 +326,7 @@ mod tests {
 
     #[test]
     fn round_trip_is_exact() {
-        let c = FlowConfig {
-            dim: 6,
-            context: 3,
-            hidden: 8,
-            steps: 8,
-        };
+        let c = six_by_eight();
         let f = flow(&c, 1, 0.1);
         let (xv, x) = random(5, 6, 2);
         let (_, ctx) = random(5, 3, 3);
@@ -469,12 +474,7 @@ mod tests {
 
     #[test]
     fn a_bounded_inverse_keeps_an_exploding_row_and_its_gradients_finite() {
-        let c = FlowConfig {
-            dim: 6,
-            context: 3,
-            hidden: 8,
-            steps: 8,
-        };
+        let c = six_by_eight();
         // Every coupling shrinks by about e^-40 going forward, so its inverse amplifies by e^40:
         // unbounded, eight of them overflow f32.
         let mut t = NamedTensors::default();
@@ -491,13 +491,14 @@ mod tests {
         let ctx = Tensor::<2>::zeros([2, 3], &device);
         let free = values(f.inverse(z.clone(), ctx.clone()).unwrap());
         assert!(free.iter().any(|v| !v.is_finite()), "{free:?}");
-        let bound = InverseBound {
-            max_log_gain: 10.0,
-            max_value: 1e4,
-        };
+        let bound = crate::net::ROLLOUT_INVERSE_BOUND;
         let x = f.inverse_within(z.clone(), ctx, Some(bound)).unwrap();
         let xv = values(x.clone());
-        assert!(xv.iter().all(|v| v.is_finite() && v.abs() <= 1e4), "{xv:?}");
+        let most = bound.max_value;
+        assert!(
+            xv.iter().all(|v| v.is_finite() && v.abs() <= most),
+            "{xv:?}"
+        );
         assert!(xv.iter().any(|v| v.abs() > 1e3), "it did explode: {xv:?}");
         let grads = x.sum().backward();
         let dz = values(z.grad(&grads).expect("a gradient"));
@@ -508,20 +509,12 @@ mod tests {
 
     #[test]
     fn a_bound_no_row_reaches_changes_nothing() {
-        let c = FlowConfig {
-            dim: 6,
-            context: 3,
-            hidden: 8,
-            steps: 8,
-        };
+        let c = six_by_eight();
         let f = flow(&c, 1, 0.1);
         let (_, z) = random(5, 6, 2);
         let (_, ctx) = random(5, 3, 3);
         let free = values(f.inverse(z.clone(), ctx.clone()).unwrap());
-        let bound = InverseBound {
-            max_log_gain: 10.0,
-            max_value: 1e4,
-        };
+        let bound = crate::net::ROLLOUT_INVERSE_BOUND;
         let held = values(f.inverse_within(z, ctx, Some(bound)).unwrap());
         assert_eq!(free, held);
     }
