@@ -14,3 +14,4 @@ pub mod net;
 pub mod song_files;
 pub mod train;
 pub mod transformer;
+pub mod weight_average;

@@ -14,7 +14,7 @@ use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::file::NeuralModel;
 use model::neural::rng::Rng;
-use model::neural::tensors::WeightError;
+use model::neural::tensors::{NamedTensors, WeightError};
 use model::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 
 /// Shortest key-pose horizon drawn in training, frames (0.5 s).
@@ -871,18 +871,47 @@ impl Trainer {
         &mut self.model
     }
 
+    /// The network's current weights alone (no normalisation, no seed clips).
+    pub fn weights(&self) -> NamedTensors {
+        let mut t = NamedTensors::default();
+        if let Some(net) = &self.net {
+            net.store(&mut t);
+        }
+        t
+    }
+
     /// Mean NLL over `batches`, nats per frame, without gradients.
     pub fn evaluate(&mut self, batches: &[Batch]) -> Result<f64, WeightError> {
-        let v = self.frame_nll(batches)?;
+        let tensors = self.model().tensors.clone();
+        self.evaluate_weights(&tensors, batches)
+    }
+
+    /// Mean NLL over `batches` of the network with `tensors`' weights (e.g. an average of
+    /// the weights over training), nats per frame, without gradients.
+    pub fn evaluate_weights(
+        &self,
+        tensors: &NamedTensors,
+        batches: &[Batch],
+    ) -> Result<f64, WeightError> {
+        let v = self.frame_nll_of(tensors, batches)?;
         Ok(v.iter().map(|&x| x as f64).sum::<f64>() / v.len().max(1) as f64)
     }
 
     /// The NLL of every frame of `batches`, nats, in order (sequence by sequence, token by
     /// token), without gradients.
     pub fn frame_nll(&mut self, batches: &[Batch]) -> Result<Vec<f32>, WeightError> {
+        let tensors = self.model().tensors.clone();
+        self.frame_nll_of(&tensors, batches)
+    }
+
+    fn frame_nll_of(
+        &self,
+        weights: &NamedTensors,
+        batches: &[Batch],
+    ) -> Result<Vec<f32>, WeightError> {
         let device = cpu_device();
         let config = self.model.config;
-        let net = Net::load(&self.model().tensors, &config, &device)?;
+        let net = Net::load(weights, &config, &device)?;
         let mut out = Vec::new();
         for b in batches {
             let t = tensors(b, &device);

@@ -76,6 +76,8 @@ fn train_writes_a_model_that_generate_and_bench_use() {
                 "0.5",
                 "--style-drop",
                 "0.1",
+                "--weight-average",
+                "0.5",
             ])
             .arg("--data")
             .arg(&data)
@@ -94,10 +96,21 @@ fn train_writes_a_model_that_generate_and_bench_use() {
     assert!(
         file.training
             .recipe
-            .ends_with("--beat-retime 0.2 --style-balance 0.5 --style-drop 0.1 --max-steps 3"),
+            .ends_with("--style-drop 0.1 --max-steps 3 --weight-average 0.5"),
         "{}",
         file.training.recipe
     );
+    // The model is the weights' average; the last step's weights lie beside it.
+    assert!(
+        stdout.contains("averaged weights (decay 0.5) written"),
+        "{stdout}"
+    );
+    let last = model::neural::file::NeuralModel::load(&dir.join("tiny.last.dnn")).unwrap();
+    assert_eq!(last.training.steps, 3);
+    let (a, l) = (&file.tensors.map, &last.tensors.map);
+    assert_eq!(a.keys().collect::<Vec<_>>(), l.keys().collect::<Vec<_>>());
+    assert!(a.iter().any(|(name, t)| t.data != l[name].data));
+    assert_eq!(a["seed.motion"], l["seed.motion"]);
     // The model file drives generate (through the streaming sampler) and the bench.
     let out = dir.join("gen.bvh");
     let (stdout, _) = succeed(

@@ -20,6 +20,7 @@ use crate::net::FreeRun;
 use crate::train::{
     Batch, Corpus, CriticTerm, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
 };
+use crate::weight_average::WeightAverage;
 
 /// Options of `danced-train dancer`.
 #[derive(clap::Args, Debug, Clone)]
@@ -180,6 +181,12 @@ pub struct TrainArgs {
     /// loaded the machine was.
     #[arg(long)]
     pub max_steps: Option<u64>,
+    /// Write an exponential moving average of the weights (Polyak averaging, this decay per
+    /// step: about `1 / (1 − D)` steps carry most of its weight) as the model, so one update's
+    /// noise is averaged out of the dancer; the last step's weights go beside it as
+    /// `OUT.last.dnn`. Default: the last step's weights are the model.
+    #[arg(long, value_parser = parse_decay)]
+    pub weight_average: Option<f64>,
     /// Use the tiny test network instead of the default size.
     #[arg(long, hide = true)]
     pub tiny: bool,
@@ -199,6 +206,18 @@ fn parse_quiet(s: &str) -> Result<f64, String> {
             "{s:?}: quiet passages a minute is a number in 0..=4"
         )),
     }
+}
+
+fn parse_decay(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..1.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: a decay is a number in 0..1 (e.g. 0.99)")),
+    }
+}
+
+/// Where the last step's weights go beside an averaged model: `X.dnn` → `X.last.dnn`.
+pub fn last_step_path(out: &Path) -> PathBuf {
+    out.with_extension("last.dnn")
 }
 
 fn parse_depth(s: &str) -> Result<f64, String> {
@@ -584,6 +603,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &args
             .max_steps
             .map_or(String::new(), |m| format!(" --max-steps {m}"))
+        + &args
+            .weight_average
+            .map_or(String::new(), |d| format!(" --weight-average {d}"))
         + &if args.speeds.is_empty() {
             String::new()
         } else {
@@ -626,16 +648,51 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         Some(trainer.evaluate(&val)?)
     };
     eprintln!("validation NLL before training: {:?} nats/frame", last_val);
-    let checkpoint =
-        |trainer: &mut Trainer, step: u64, val: Option<f64>, elapsed: f64| -> Result<()> {
-            let m = trainer.model();
-            m.training.steps = previous.steps + step;
-            m.training.sequences = previous.sequences + step * args.batch as u64;
-            m.training.seconds = previous.seconds + elapsed;
-            m.training.validation_nll = val;
-            m.save(&args.out)
-                .with_context(|| format!("writing {}", args.out.display()))
+    let mut average = args
+        .weight_average
+        .map(|decay| WeightAverage::new(decay, &trainer.weights()));
+    // The validation NLL of what goes to `--out`: the averaged weights when averaging.
+    let validate =
+        |trainer: &mut Trainer, average: Option<&WeightAverage>| -> Result<Option<f64>> {
+            if val.is_empty() {
+                return Ok(None);
+            }
+            Ok(Some(match average {
+                Some(avg) => {
+                    let mut tensors = trainer.model().tensors.clone();
+                    avg.apply_to(&mut tensors);
+                    trainer.evaluate_weights(&tensors, &val)?
+                }
+                None => trainer.evaluate(&val)?,
+            }))
         };
+    let checkpoint = |trainer: &mut Trainer,
+                      average: Option<&WeightAverage>,
+                      step: u64,
+                      val: Option<f64>,
+                      elapsed: f64|
+     -> Result<()> {
+        let m = trainer.model();
+        m.training.steps = previous.steps + step;
+        m.training.sequences = previous.sequences + step * args.batch as u64;
+        m.training.seconds = previous.seconds + elapsed;
+        m.training.validation_nll = val;
+        let Some(avg) = average else {
+            return m
+                .save(&args.out)
+                .with_context(|| format!("writing {}", args.out.display()));
+        };
+        let last = last_step_path(&args.out);
+        let mut averaged = m.clone();
+        avg.apply_to(&mut averaged.tensors);
+        // The validation NLL measured is the average's; the last step's is not measured here.
+        m.training.validation_nll = None;
+        m.save(&last)
+            .with_context(|| format!("writing {}", last.display()))?;
+        averaged
+            .save(&args.out)
+            .with_context(|| format!("writing {}", args.out.display()))
+    };
     while started.elapsed() < budget && args.max_steps.is_none_or(|m| step < m) {
         let by_time = started.elapsed().as_secs_f64() / budget.as_secs_f64().max(1e-9);
         let by_steps = args
@@ -678,6 +735,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         });
         let scored = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux);
         let loss = f64::from(scored.nll);
+        if let Some(avg) = average.as_mut()
+            && loss.is_finite()
+        {
+            avg.update(&trainer.weights());
+        }
         skipped_rollouts += u64::from(rollout.is_some() && scored.key_error.is_none());
         exploded_sequences += scored.exploded_sequences as u64;
         gradient_skips += u64::from(scored.gradient_not_finite);
@@ -702,12 +764,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         step += 1;
         let secs = started.elapsed().as_secs_f64();
         if step.is_multiple_of(steps_per_epoch) {
-            last_val = if val.is_empty() {
-                None
-            } else {
-                Some(trainer.evaluate(&val)?)
-            };
-            checkpoint(&mut trainer, step, last_val, secs)?;
+            last_val = validate(&mut trainer, average.as_ref())?;
+            checkpoint(&mut trainer, average.as_ref(), step, last_val, secs)?;
             // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
             let line = format!(
                 "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}{}{}",
@@ -748,12 +806,16 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     }
     pb.finish_and_clear();
     let secs = started.elapsed().as_secs_f64();
-    last_val = if val.is_empty() {
-        None
-    } else {
-        Some(trainer.evaluate(&val)?)
-    };
-    checkpoint(&mut trainer, step, last_val, secs)?;
+    last_val = validate(&mut trainer, average.as_ref())?;
+    checkpoint(&mut trainer, average.as_ref(), step, last_val, secs)?;
+    if average.is_some() && !val.is_empty() {
+        println!(
+            "averaged weights (decay {}) written; the last step's weights ({}): validation NLL {:.3} nats/frame",
+            args.weight_average.unwrap_or_default(),
+            last_step_path(&args.out).display(),
+            trainer.evaluate(&val)?
+        );
+    }
     println!(
         "trained {step} steps in {secs:.0} s ({:.3} s/step, {:.0} frames/s, {:.2} epochs); validation NLL {} nats/frame; wrote {}",
         secs / step.max(1) as f64,
