@@ -77,7 +77,18 @@ pub struct EvalRow {
     pub seconds: f64,
 }
 
-/// The data the evaluation runs on: validation dances and the training reference.
+/// Which dances' songs are danced to and scored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScoredDances {
+    /// The validation dances (every table of `danced eval`).
+    Validation,
+    /// The training dances: a score a checkpoint can be picked by without the validation
+    /// dances seeing the pick.
+    Training,
+}
+
+/// The data the evaluation runs on: the scored dances (validation, unless said) and the
+/// training reference.
 pub struct EvalSet {
     validation: Vec<EvalDance>,
     /// Training ground-truth world positions, one Vec per dance.
@@ -189,8 +200,15 @@ fn windows_of(positions: &[glam::Vec3], frames: usize) -> Vec<Vec<f64>> {
 }
 
 impl EvalSet {
-    /// Builds every dance under `data` (as `dataset build` does) with `jobs` threads.
+    /// Builds every dance under `data` (as `dataset build` does) with `jobs` threads; the
+    /// validation dances are scored.
     pub fn load(data: &Path, jobs: usize) -> Result<EvalSet> {
+        Self::load_scoring(data, jobs, ScoredDances::Validation)
+    }
+
+    /// As [`EvalSet::load`], scoring the `scored` dances (the reference is always the
+    /// training dances).
+    pub fn load_scoring(data: &Path, jobs: usize, scored: ScoredDances) -> Result<EvalSet> {
         let built = crate::dataset::build_all(data, jobs, |d, _| d.audio.is_some(), false)?;
         let skeleton = Skeleton::default_adult();
         let mut set = EvalSet {
@@ -214,6 +232,8 @@ impl EvalSet {
                         .extend(windows_of(&p, style_frames).into_iter().map(|w| (style, w)));
                 }
                 set.train_positions.push(p);
+            }
+            if b.validation != (scored == ScoredDances::Validation) {
                 continue;
             }
             let Some(start) = b.start_s else { continue };
@@ -811,6 +831,30 @@ pub fn table(rows: &[EvalRow]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn training_songs_are_scored_without_a_validation_dance() {
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+        if !data.join("tang2018").is_dir() {
+            eprintln!("skipping: {} not found", data.join("tang2018").display());
+            return;
+        }
+        let split = crate::dataset::dances_with_split(&data).unwrap();
+        let validation: Vec<&String> = split.iter().filter(|d| d.2).map(|d| &d.1).collect();
+        let set = EvalSet::load_scoring(&data, 2, ScoredDances::Training).unwrap();
+        let scored = set.validation_names();
+        // Every training dance with its song (tang2018 lacks five songs), none of validation.
+        assert!(scored.len() >= 25, "{scored:?}");
+        assert!(
+            scored.iter().all(|n| !validation.contains(&n)),
+            "{scored:?}"
+        );
+        assert_eq!(set.train_positions.len(), scored.len());
+        let gt = set.score("ground truth", &set.ground_truth()).unwrap();
+        // The training dances scored against themselves: the FID_k is small but not zero
+        // (5 s windows against the pooled set).
+        assert!(gt.fid_k.is_finite() && gt.fid_k < 10.0, "{}", gt.fid_k);
+    }
 
     #[test]
     fn styles_come_from_the_dance_names() {

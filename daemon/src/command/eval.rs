@@ -35,6 +35,10 @@ pub struct EvalArgs {
     /// for the retrieval, shipped neural and network-only rows.
     #[arg(long, conflicts_with_all = ["quick", "ground_truth"])]
     pub music: bool,
+    /// Only the shipped neural rows, danced to the training dances' songs and scored against
+    /// the training dances: a checkpoint picked by this never saw the validation dances.
+    #[arg(long, conflicts_with_all = ["quick", "ground_truth", "music"])]
+    pub training_songs: bool,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -97,6 +101,27 @@ fn sources(
     Ok(sources)
 }
 
+/// The shipped neural dancer on the training dances' songs (`--training-songs`).
+fn training_songs_table(o: &EvalArgs, temperatures: &[f32], started: Instant) -> Result<()> {
+    let set =
+        crate::eval::EvalSet::load_scoring(&o.data, o.jobs, crate::eval::ScoredDances::Training)?;
+    eprintln!(
+        "training dances scored: {} (loaded in {:.1} s)",
+        set.validation_names().len(),
+        started.elapsed().as_secs_f64()
+    );
+    let model = crate::dancer::load_model(o.model.as_deref())?;
+    let mut dancer = crate::dancer::neural_dancer(&model, o.seed)?;
+    let mut rows = vec![set.score("ground truth, training dances", &set.ground_truth())?];
+    for &t in temperatures {
+        let (motions, _) = set.generate(&mut dancer, t, o.seed);
+        rows.push(set.score(&format!("neural T={t}, training songs"), &motions)?);
+    }
+    print!("{}", crate::eval::table(&rows));
+    eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
 /// Runs `danced eval`.
 pub fn eval(o: &EvalArgs) -> Result<()> {
     let started = Instant::now();
@@ -108,6 +133,9 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         music_table(o, &mut sources, &temperatures)?;
         eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
         return Ok(());
+    }
+    if o.training_songs {
+        return training_songs_table(o, &temperatures, started);
     }
     let set = crate::eval::EvalSet::load(&o.data, o.jobs)?;
     eprintln!(
