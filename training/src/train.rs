@@ -882,8 +882,8 @@ impl Trainer {
 
     /// Mean NLL over `batches`, nats per frame, without gradients.
     pub fn evaluate(&mut self, batches: &[Batch]) -> Result<f64, WeightError> {
-        let tensors = self.model().tensors.clone();
-        self.evaluate_weights(&tensors, batches)
+        self.model();
+        self.evaluate_weights(&self.model.tensors, batches)
     }
 
     /// Mean NLL over `batches` of the network with `tensors`' weights (e.g. an average of
@@ -900,8 +900,8 @@ impl Trainer {
     /// The NLL of every frame of `batches`, nats, in order (sequence by sequence, token by
     /// token), without gradients.
     pub fn frame_nll(&mut self, batches: &[Batch]) -> Result<Vec<f32>, WeightError> {
-        let tensors = self.model().tensors.clone();
-        self.frame_nll_of(&tensors, batches)
+        self.model();
+        self.frame_nll_of(&self.model.tensors, batches)
     }
 
     fn frame_nll_of(

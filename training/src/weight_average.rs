@@ -56,6 +56,11 @@ impl WeightAverage {
         self.updates += 1;
     }
 
+    /// The averaged weights (the tensors the average was started from, no others).
+    pub fn weights(&self) -> &NamedTensors {
+        &self.average
+    }
+
     /// Updates folded in so far.
     pub fn updates(&self) -> u64 {
         self.updates

@@ -658,11 +658,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 return Ok(None);
             }
             Ok(Some(match average {
-                Some(avg) => {
-                    let mut tensors = trainer.model().tensors.clone();
-                    avg.apply_to(&mut tensors);
-                    trainer.evaluate_weights(&tensors, &val)?
-                }
+                Some(avg) => trainer.evaluate_weights(avg.weights(), &val)?,
                 None => trainer.evaluate(&val)?,
             }))
         };
