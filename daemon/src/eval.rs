@@ -171,13 +171,21 @@ impl StyleClassifier {
 /// Length of the windows before a key pose whose kinetics are compared with free dancing, s.
 pub const TRANSITION_S: f64 = 2.0;
 
-/// FID_k of the motion leading into key poses and of free dancing, on [`TRANSITION_S`] windows
-/// against the training dances' windows of that length.
+/// Passes over the validation songs that [`EvalSet::transition_fid`] pools: one pass gives 64
+/// windows of each kind, fewer than the kinetic features' 72 dimensions, and its FID_k ratio
+/// moved from 3.0 to 7.5 between two noise seeds of one dancer.
+pub const TRANSITION_PASSES: usize = 10;
+
+/// FID_k of the motion leading into key poses, of the motion leaving them and of free dancing,
+/// on [`TRANSITION_S`] windows against the training dances' windows of that length.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct TransitionFid {
     /// The windows ending on a key pose's target frame (announced [`TRANSITION_S`] ahead).
     pub before_key: f64,
-    /// Windows of the same dances with no key pose announced (ending halfway between cues).
+    /// The windows starting on the frame after a key pose's target frame.
+    pub after_key: f64,
+    /// The windows ending on the same frames as `before_key`, of the same songs danced with the
+    /// same noise and no key pose at all.
     pub free: f64,
     /// Windows of each kind.
     pub windows: usize,
@@ -389,8 +397,11 @@ impl EvalSet {
         (sum / count.max(1) as f64, count)
     }
 
-    /// How the motion leading into key poses (announced [`TRANSITION_S`] ahead, cues as in
-    /// [`EvalSet::key_pose_error`]) compares with free dancing: FID_k of both kinds of window.
+    /// How the motion leading into key poses (announced [`TRANSITION_S`] ahead) and out of
+    /// them compares with free dancing: FID_k of the three kinds of window, over
+    /// [`TRANSITION_PASSES`] passes of every validation song, each with its own noise seed, cue
+    /// times and key poses. Free dancing is the same pass danced with no cue, so it is neither
+    /// the approach to a key pose nor the way out of one.
     pub fn transition_fid(
         &self,
         source: &mut dyn MotionSource,
@@ -399,30 +410,38 @@ impl EvalSet {
         bank: &[[Quat; JOINT_COUNT]],
     ) -> Result<TransitionFid> {
         let len = (TRANSITION_S * TANG_FPS).round() as usize;
-        let spacing = (KEY_CUE_SPACING_S * TANG_FPS).round() as usize;
         let skeleton = Skeleton::default_adult();
-        let (mut before, mut free) = (Vec::new(), Vec::new());
-        for (i, d) in self.validation.iter().enumerate() {
-            let frames = d.music.len().saturating_sub(source.lookahead_frames());
-            let cues = key_cues(i, frames, bank);
-            let motion = dance_to(source, &d.music, frames, temperature, seed, &cues, len);
-            let p = skeleton.trajectory(&motion);
-            let window = |end: usize| {
-                let from = (end + 1).checked_sub(len)?;
-                let w = p.get(from * JOINT_COUNT..(end + 1) * JOINT_COUNT)?;
-                kinetic_features(&JointTrack::new(w, JOINT_COUNT, TANG_FPS).ok()?).ok()
-            };
-            for c in &cues {
-                // Halfway to the next cue nothing has been announced for 2 s or more.
-                let (b, f) = (window(c.frame), window(c.frame + spacing / 2));
-                if let (Some(b), Some(f)) = (b, f) {
-                    before.push(b);
-                    free.push(f);
+        let (mut before, mut after, mut free) = (Vec::new(), Vec::new(), Vec::new());
+        for pass in 0..TRANSITION_PASSES {
+            let pass_seed = seed.wrapping_add(pass as u64);
+            for (i, d) in self.validation.iter().enumerate() {
+                let frames = d.music.len().saturating_sub(source.lookahead_frames());
+                let cues = key_cues_of_pass(i, frames, bank, pass);
+                let cued = dance_to(source, &d.music, frames, temperature, pass_seed, &cues, len);
+                let uncued = dance_to(source, &d.music, frames, temperature, pass_seed, &[], 0);
+                let (cued, uncued) = (skeleton.trajectory(&cued), skeleton.trajectory(&uncued));
+                let window = |p: &[glam::Vec3], from: usize| {
+                    let w = p.get(from * JOINT_COUNT..(from + len) * JOINT_COUNT)?;
+                    kinetic_features(&JointTrack::new(w, JOINT_COUNT, TANG_FPS).ok()?).ok()
+                };
+                for c in cues.iter().filter(|c| c.frame + 1 >= len) {
+                    let start = c.frame + 1 - len;
+                    let windows = (
+                        window(&cued, start),
+                        window(&cued, c.frame + 1),
+                        window(&uncued, start),
+                    );
+                    if let (Some(b), Some(a), Some(f)) = windows {
+                        before.push(b);
+                        after.push(a);
+                        free.push(f);
+                    }
                 }
             }
         }
         Ok(TransitionFid {
             before_key: fid_k(&self.train_kinetic_short, &before)?,
+            after_key: fid_k(&self.train_kinetic_short, &after)?,
             free: fid_k(&self.train_kinetic_short, &free)?,
             windows: before.len(),
         })
@@ -493,14 +512,26 @@ impl EvalSet {
 /// The key-pose cues of validation song `song` (`frames` long): a pose of `bank`, in turn,
 /// every [`KEY_CUE_SPACING_S`] from [`KEY_CUE_SPACING_S`] / 2 on.
 fn key_cues(song: usize, frames: usize, bank: &[[Quat; JOINT_COUNT]]) -> Vec<KeyCue> {
+    key_cues_of_pass(song, frames, bank, 0)
+}
+
+/// The cues of pass `pass` of [`TRANSITION_PASSES`]: those of [`key_cues`] moved later by
+/// `pass` / [`TRANSITION_PASSES`] of their spacing, and each pass takes its own bank poses.
+fn key_cues_of_pass(
+    song: usize,
+    frames: usize,
+    bank: &[[Quat; JOINT_COUNT]],
+    pass: usize,
+) -> Vec<KeyCue> {
     let spacing = (KEY_CUE_SPACING_S * TANG_FPS).round() as usize;
+    let first = spacing / 2 + pass * spacing / TRANSITION_PASSES;
     (0..)
-        .map(|k| spacing / 2 + k * spacing)
+        .map(|k| first + k * spacing)
         .take_while(|&f| f < frames)
         .enumerate()
         .map(|(k, frame)| KeyCue {
             name: String::new(),
-            rotations: bank[(song * 5 + k) % bank.len()],
+            rotations: bank[(song * 5 + k + pass * 53) % bank.len()],
             frame,
         })
         .collect()
@@ -725,6 +756,14 @@ impl MusicSet {
                 row.on_minus_off[b] += on - beat_align(&track, &song.off_beats);
                 row.band_songs[b] += 1;
             }
+            if std::env::var_os("PROBE_QUIET").is_some() {
+                let mut line = format!("PROBE {system} song {i} bpm {:.0}:", song.bpm);
+                for part in &song.quiet {
+                    let (a, b) = speed_inside_and_out(&p, &[*part]);
+                    line += &format!(" [{:.1}-{:.1}] {:.2}", part.0, part.1, a / b);
+                }
+                eprintln!("{line}");
+            }
             if !song.quiet.is_empty() {
                 let (inside, outside) = speed_inside_and_out(&p, &song.quiet);
                 if outside > 0.0 {
@@ -853,6 +892,38 @@ mod tests {
         let gt = set.score("ground truth", &set.ground_truth()).unwrap();
         // The training dances scored against themselves: the very same windows.
         assert!(gt.fid_k.abs() < 1e-3, "{}", gt.fid_k);
+    }
+
+    #[test]
+    fn each_transition_pass_moves_its_cues_and_takes_its_own_key_poses() {
+        let bank: Vec<[Quat; JOINT_COUNT]> = (0..16)
+            .map(|i| [Quat::from_rotation_x(i as f32 * 0.01); JOINT_COUNT])
+            .collect();
+        let frames = 1_200;
+        let spacing = (KEY_CUE_SPACING_S * TANG_FPS).round() as usize;
+        assert_eq!(
+            key_cues(2, frames, &bank),
+            key_cues_of_pass(2, frames, &bank, 0)
+        );
+        let first = key_cues_of_pass(2, frames, &bank, 0);
+        assert_eq!(first[0].frame, spacing / 2);
+        assert_eq!(first[1].frame - first[0].frame, spacing);
+        for pass in 1..TRANSITION_PASSES {
+            let cues = key_cues_of_pass(2, frames, &bank, pass);
+            // Moved by a tenth of the spacing a pass: the passes tile the gap between cues.
+            // (16 poses, as the shipped bank holds.)
+            assert_eq!(
+                cues[0].frame,
+                spacing / 2 + pass * spacing / TRANSITION_PASSES
+            );
+            assert!(cues.iter().all(|c| c.frame < frames));
+            assert!(
+                cues.iter()
+                    .zip(&first)
+                    .all(|(c, f)| c.rotations != f.rotations),
+                "pass {pass}"
+            );
+        }
     }
 
     #[test]

@@ -237,22 +237,30 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         }
     }
     print!("{key_table}");
-    // Transitions: the 2 s leading into a key pose against 2 s of free dancing.
+    // Transitions: the 2 s leading into a key pose and the 2 s after it against the same
+    // windows danced with no key pose.
     println!(
-        "\n| system | FID_k of the {} s before key poses ↓ | of free dancing ↓ | ratio (target ≤ 1.25) | windows |\n| --- | --- | --- | --- | --- |",
-        crate::eval::TRANSITION_S
+        "\n| system | FID_k of the {s} s before key poses ↓ | of the {s} s after them ↓ | of the same windows danced free ↓ | before / free (target ≤ 1.25) | after / free | windows |\n| --- | --- | --- | --- | --- | --- | --- |",
+        s = crate::eval::TRANSITION_S
     );
-    for (name, dancer) in sources
+    let mut led = crate::dancer::neural_dancer(&model, o.seed)?;
+    led.set_key_pose_route(model::neural::dancer::KeyPoseRoute::Network);
+    let mut transition_sources: Vec<(String, &mut dyn MotionSource)> = sources
         .iter_mut()
         .filter(|(n, _)| !n.contains("full") && !ablation(n))
-    {
+        .map(|(n, d)| (n.clone(), d.as_mut() as &mut dyn MotionSource))
+        .collect();
+    transition_sources.push(("neural, key to the network".into(), &mut led));
+    for (name, dancer) in transition_sources {
         let t = 0.5;
-        let f = set.transition_fid(dancer.as_mut(), t, o.seed, &bank)?;
+        let f = set.transition_fid(dancer, t, o.seed, &bank)?;
         println!(
-            "| {name} T={t} | {:.1} | {:.1} | {:.2} | {} |",
+            "| {name} T={t} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {} |",
             f.before_key,
+            f.after_key,
             f.free,
             f.before_key / f.free,
+            f.after_key / f.free,
             f.windows
         );
     }

@@ -14,7 +14,8 @@ use dsp::feature::{FEATURE_DIM, FeatureLayout};
 
 use crate::foot_lock::{self, FootLock};
 use crate::motion::{
-    MOTION_FEATURE_DIM, MotionDecoder, ROOT_DFACING, ROOT_DX, ROOT_DZ, ROTATIONS, RootState,
+    MOTION_FEATURE_DIM, MotionDecoder, ROOT_DFACING, ROOT_DX, ROOT_DZ, ROTATION_DIM, ROTATIONS,
+    RootState,
 };
 use crate::neural::file::{FRAME_RATE, ModelFileError, NeuralModel};
 use crate::neural::rng::Rng;
@@ -22,6 +23,7 @@ use crate::neural::runtime::Runtime;
 use crate::neural::safety::{SafetyCounts, SafetyNets};
 use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 use crate::rig::{Pose, Skeleton};
+use crate::rotation::{quat_to_6d, sixd_to_quat};
 use crate::source::{Controls, MotionSource, finite_clamp};
 use crate::style::{DanceStyle, StyleFromMusic, StyleRequest};
 
@@ -37,10 +39,29 @@ pub const RANGE_MARGIN: f32 = 0.05;
 /// constant.
 pub const CONSTANT_FEATURE_RANGE: f32 = 1e-3;
 
-/// Frames before a key pose's deadline over which the sampled rotations are pulled onto it
-/// (smoothstep), as the retrieval dancer does: the performer's cue lands even where the
-/// network alone would arrive late or near. 0 turns it off.
-pub const KEY_BLEND_FRAMES: u32 = 25;
+/// Most frames before a key pose's deadline over which the rotations shown are pulled onto it
+/// (smoothstep; a cue announced later is blended over the time it gives), as the retrieval
+/// dancer does: the performer's cue lands even where the network alone would arrive late or
+/// near. 0 turns it off.
+pub const KEY_BLEND_FRAMES: u32 = 50;
+
+/// Frames over which the rotations shown glide from a key pose back to the network's own dance
+/// after its deadline, when the key is shown over the dance ([`KeyPoseRoute::Overlay`]).
+pub const KEY_RELEASE_FRAMES: u32 = 50;
+
+/// Where a key pose goes while the end blend is on. With the blend off (or its frames 0) the
+/// key always goes to the network: nothing else would bring it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KeyPoseRoute {
+    /// The network reads the key and the blend's pose is fed back to it, so it sees itself
+    /// arrive and dances on from the key pose.
+    Network,
+    /// The network dances on without the key; only the pose shown is blended onto the key and,
+    /// after the deadline, glides back onto the network's dance. The shipped route: the
+    /// shipped network's own approach to a key is far less like dancing (`danced eval`'s
+    /// transition table).
+    Overlay,
+}
 
 /// Default depth of the beat accent (see [`NeuralDancer::set_beat_accent`]): none, because the
 /// shipped network learned its accent from training dances retimed within each beat
@@ -106,6 +127,14 @@ pub struct NeuralDancer {
     nets: SafetyNets,
     counts: SafetyCounts,
     key_blend_frames: u32,
+    key_route: KeyPoseRoute,
+    /// Frames since the last key pose's deadline (`u32::MAX`: none yet, or one announced).
+    since_key: u32,
+    /// Frames from the current cue's announcement to its deadline, and its last count-down.
+    key_lead: u32,
+    last_frames_to_go: Option<u32>,
+    /// The features decoded into the pose shown (the network's, or blended onto a key).
+    shown: [f32; MOTION_FEATURE_DIM],
     beat_accent: f32,
     /// Pose the dancer glides from after a restart, and the frames of the glide left.
     glide_from: Pose,
@@ -182,6 +211,11 @@ impl NeuralDancer {
             nets: SafetyNets::SHIPPED,
             counts: SafetyCounts::default(),
             key_blend_frames: KEY_BLEND_FRAMES,
+            key_route: KeyPoseRoute::Overlay,
+            since_key: u32::MAX,
+            key_lead: 0,
+            last_frames_to_go: None,
+            shown: [0.0; MOTION_FEATURE_DIM],
             beat_accent: BEAT_ACCENT,
             glide_from: Pose::rest(),
             glide_left: 0,
@@ -209,7 +243,12 @@ impl NeuralDancer {
         }
     }
 
-    /// Sets the frames over which a key pose is blended in before its deadline (0: the
+    /// Sets where key poses go while the end blend is on (default [`KeyPoseRoute::Overlay`]).
+    pub fn set_key_pose_route(&mut self, route: KeyPoseRoute) {
+        self.key_route = route;
+    }
+
+    /// Sets the most frames over which a key pose is blended in before its deadline (0: the
     /// network's own arrival, unaided).
     pub fn set_key_blend_frames(&mut self, frames: u32) {
         self.key_blend_frames = frames;
@@ -372,11 +411,22 @@ impl MotionSource for NeuralDancer {
             self.norm.key(&self.key_raw, &mut self.key);
             k.frames_to_go
         });
+        // A count-down that goes up is a new cue; its lead is the time it gives. (One that
+        // stays put is the live clock's rounding, not a new cue.)
+        self.key_lead = match (key, self.last_frames_to_go) {
+            (Some(f), Some(last)) if f <= last => self.key_lead,
+            (Some(f), _) => f.saturating_add(1),
+            (None, _) => 0,
+        };
+        self.last_frames_to_go = key;
+        let overlay = self.nets.key_blend
+            && self.key_blend_frames > 0
+            && self.key_route == KeyPoseRoute::Overlay;
         token::fill(
             &mut self.token,
             &self.previous,
             &self.music,
-            key.map(|f| (&self.key[..], f)),
+            key.filter(|_| !overlay).map(|f| (&self.key[..], f)),
         );
         self.runtime.push(&self.token);
         let t = finite_clamp(controls.temperature, 0.0, f32::INFINITY);
@@ -429,29 +479,53 @@ impl MotionSource for NeuralDancer {
                 }
             }
             // How far into a key pose's arrival this frame is (smoothstep over the blend's
-            // frames): the end blend's weight, and how much of a held foot lets go (a leg
-            // bent to hold its toe would bend the key pose too, blended or not).
+            // frames, or the cue's lead where that is shorter): the end blend's weight, and how
+            // much of a held foot lets go (a leg bent to hold its toe would bend the key pose
+            // too, blended or not).
+            let lead = self.key_lead;
+            let smoothstep = |x: f32| x * x * (3.0 - 2.0 * x);
             let arrival = |frames: u32| {
-                key.filter(|&f| f < frames).map(|ftg| {
-                    let x = 1.0 - ftg as f32 / frames as f32;
-                    x * x * (3.0 - 2.0 * x)
-                })
+                let frames = frames.min(lead);
+                key.filter(|&f| f < frames)
+                    .map(|ftg| smoothstep(1.0 - ftg as f32 / frames as f32))
             };
-            let let_go = arrival(self.key_blend_frames.max(KEY_BLEND_FRAMES)).unwrap_or(0.0);
-            let blend = arrival(self.key_blend_frames).filter(|_| self.nets.key_blend);
+            self.since_key = match key {
+                Some(0) => 0,
+                Some(_) => u32::MAX,
+                None => self.since_key.saturating_add(1),
+            };
+            let release = (overlay && self.since_key > 0 && self.since_key < KEY_RELEASE_FRAMES)
+                .then(|| smoothstep(1.0 - self.since_key as f32 / KEY_RELEASE_FRAMES as f32));
+            let let_go = arrival(self.key_blend_frames.max(KEY_BLEND_FRAMES))
+                .or(release)
+                .unwrap_or(0.0);
+            let blend = arrival(self.key_blend_frames)
+                .or(release)
+                .filter(|_| self.nets.key_blend);
+            self.shown = self.features;
             if let Some(w) = blend {
                 self.counts.key_blended += 1;
-                // Both are heading-free 6D rotations; the decoder re-orthonormalises the
-                // blend. Fed back too, so the network sees itself arrive.
-                for (f, k) in self.features[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
-                    .iter_mut()
-                    .zip(&self.key_raw)
+                // Both are heading-free 6D rotations, blended along the arc between them (a
+                // straight line between two 6D rotations far apart turns fastest halfway).
+                // Routed to the network, the blend is fed back so that it sees itself arrive;
+                // as an overlay the network keeps its own dance under it.
+                for (f, k) in self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
+                    .chunks_exact_mut(ROTATION_DIM)
+                    .zip(self.key_raw.chunks_exact(ROTATION_DIM))
                 {
-                    *f += w * (k - *f);
+                    let mut from = [0.0; ROTATION_DIM];
+                    let mut to = [0.0; ROTATION_DIM];
+                    from.copy_from_slice(f);
+                    to.copy_from_slice(k);
+                    let q = sixd_to_quat(from).slerp(sixd_to_quat(to), w);
+                    f.copy_from_slice(&quat_to_6d(q));
+                }
+                if !overlay {
+                    self.features = self.shown;
                 }
             }
             self.norm.pose(&self.features, &mut self.sample);
-            self.decoder.decode_frame(&self.features, out);
+            self.decoder.decode_frame(&self.shown, out);
             if self.glide_left > 0 {
                 let w = self.glide_left as f32 / (RESTART_BLEND_FRAMES + 1) as f32;
                 for (r, from) in out
@@ -505,6 +579,9 @@ impl MotionSource for NeuralDancer {
         self.counts = SafetyCounts::default();
         self.mean_speed_mps = 0.0;
         self.glide_left = 0;
+        self.since_key = u32::MAX;
+        self.key_lead = 0;
+        self.last_frames_to_go = None;
         self.foot_lock.reset();
     }
 
@@ -821,7 +898,7 @@ mod tests {
                     temperature: 1.0,
                     key_pose: Some(KeyPoseTarget {
                         rotations: key,
-                        frames_to_go: (40 - (i % 40)) as u32,
+                        frames_to_go: (80 - (i % 80)) as u32,
                     }),
                     ..Controls::default()
                 };
@@ -834,10 +911,10 @@ mod tests {
         assert_eq!(shipped.frames, 300);
         assert_eq!(shipped.accented, 300, "{shipped:?}");
         assert!(shipped.speed_limited > 100, "{shipped:?}");
-        // 24 of every 40 frames are under 25 frames from the deadline (1..=24 to go), and 4
-        // of the last 20 (24..=21 to go).
+        // 49 of every 80 frames are under 50 frames from the deadline (1..=49 to go), and 29
+        // of the last 60 (49..=21 to go).
         assert_eq!(shipped.held, 0, "{shipped:?}");
-        assert_eq!(shipped.key_blended, 7 * 24 + 4, "{shipped:?}");
+        assert_eq!(shipped.key_blended, 3 * 49 + 29, "{shipped:?}");
         let alone = run(SafetyNets::NETWORK_ONLY);
         assert_eq!(
             alone,
@@ -955,6 +1032,77 @@ mod tests {
             .map(|j| pose.local_rotations[j].angle_between(target))
             .fold(0.0f32, f32::max);
         assert!(worst > 0.1, "{worst}");
+    }
+
+    #[test]
+    fn an_overlaid_key_pose_leaves_the_dance_under_it_untouched() {
+        let target = Quat::from_rotation_x(0.8);
+        let mut rotations = [Quat::IDENTITY; 22];
+        for r in rotations.iter_mut().skip(1) {
+            *r = target;
+        }
+        // A cue announced at frame 20, due at frame 100; every pose shown, with and without it.
+        let run = |cue: bool| {
+            let mut d = dancer(0.05);
+            d.set_foot_lock(0.0);
+            d.reset(2);
+            let music = [[0.1f32; FEATURE_DIM]; 3];
+            let mut pose = Pose::rest();
+            (0..200u32)
+                .map(|i| {
+                    let key_pose = (cue && (20..=100).contains(&i)).then_some(KeyPoseTarget {
+                        rotations,
+                        frames_to_go: 100u32.saturating_sub(i),
+                    });
+                    let controls = Controls {
+                        temperature: 0.0,
+                        key_pose,
+                        ..Controls::default()
+                    };
+                    d.step(&music, &controls, &mut pose);
+                    pose
+                })
+                .collect::<Vec<_>>()
+        };
+        let (cued, free) = (run(true), run(false));
+        let angle =
+            |a: &Pose, b: &Pose, j: usize| a.local_rotations[j].angle_between(b.local_rotations[j]);
+        // The blend takes the last 50 frames before the deadline (51..=100), the release the 49
+        // after it (101..=149); outside them the network's dance is shown as it is.
+        for i in (0..=50).chain(150..200) {
+            assert_eq!(
+                cued[i].local_rotations, free[i].local_rotations,
+                "frame {i}"
+            );
+        }
+        let key_pose = Pose {
+            local_rotations: {
+                let mut r = free[100].local_rotations;
+                r[1..22].copy_from_slice(&rotations[1..]);
+                r
+            },
+            ..free[100]
+        };
+        for j in 1..22 {
+            assert!(
+                angle(&cued[100], &key_pose, j) < 0.02,
+                "joint {j} at the deadline"
+            );
+            assert!(angle(&cued[75], &free[75], j) > 0.01, "joint {j} mid-blend");
+        }
+        // Onto the key and off it the pose glides: no frame moves a joint by more than the
+        // dance does plus a tenth of the way between the key and the dance.
+        for j in 1..22 {
+            let gap = angle(&key_pose, &free[100], j);
+            assert!(gap > 0.3, "joint {j}: the key is {gap} rad from the dance");
+            let worst = |m: &[Pose], range: std::ops::Range<usize>| {
+                range
+                    .map(|i| angle(&m[i], &m[i - 1], j))
+                    .fold(0.0f32, f32::max)
+            };
+            let (c, f) = (worst(&cued, 51..151), worst(&free, 51..151));
+            assert!(c < f + 0.1 * gap, "joint {j}: {c} rad a frame against {f}");
+        }
     }
 
     #[test]
