@@ -14,7 +14,8 @@ pub struct SafetyNets {
     pub restart: bool,
     /// The beat accent: the motion retimed within each beat.
     pub beat_accent: bool,
-    /// The end blend: rotations pulled onto a key pose in the frames before its deadline.
+    /// The end blend: rotations pulled onto a key pose in the frames before its deadline (and,
+    /// shown over the dance, glided back off it after).
     pub key_blend: bool,
     /// The foot lock: a planted toe's drift taken back.
     pub foot_lock: bool,
@@ -66,7 +67,7 @@ pub struct SafetyCounts {
     pub restarts: u64,
     /// Frames retimed by a non-zero beat accent.
     pub accented: u64,
-    /// Frames blended towards a key pose.
+    /// Frames blended towards a key pose or, after it, back off it.
     pub key_blended: u64,
     /// Frames whose root the foot lock moved.
     pub foot_locked: u64,
