@@ -128,8 +128,14 @@ pub struct NeuralDancer {
     counts: SafetyCounts,
     key_blend_frames: u32,
     key_route: KeyPoseRoute,
-    /// Frames since the last key pose's deadline (`u32::MAX`: none yet, or one announced).
-    since_key: u32,
+    /// The rotations of the cue being blended in (raw 6D), and of the one being let go.
+    target_raw: [f32; KEY_ROT_DIM],
+    released_raw: [f32; KEY_ROT_DIM],
+    /// The blend's weight on the last frame, the release's weight when it began, and the
+    /// frames since it began (`u32::MAX`: none).
+    blend_last: f32,
+    release_from: f32,
+    since_release: u32,
     /// Frames from the current cue's announcement to its deadline, and its last count-down.
     key_lead: u32,
     last_frames_to_go: Option<u32>,
@@ -212,7 +218,11 @@ impl NeuralDancer {
             counts: SafetyCounts::default(),
             key_blend_frames: KEY_BLEND_FRAMES,
             key_route: KeyPoseRoute::Overlay,
-            since_key: u32::MAX,
+            target_raw: [0.0; KEY_ROT_DIM],
+            released_raw: [0.0; KEY_ROT_DIM],
+            blend_last: 0.0,
+            release_from: 0.0,
+            since_release: u32::MAX,
             key_lead: 0,
             last_frames_to_go: None,
             shown: [0.0; MOTION_FEATURE_DIM],
@@ -411,13 +421,34 @@ impl MotionSource for NeuralDancer {
             self.norm.key(&self.key_raw, &mut self.key);
             k.frames_to_go
         });
-        // A count-down that goes up is a new cue; its lead is the time it gives. (One that
-        // stays put is the live clock's rounding, not a new cue.)
-        self.key_lead = match (key, self.last_frames_to_go) {
-            (Some(f), Some(last)) if f <= last => self.key_lead,
-            (Some(f), _) => f.saturating_add(1),
-            (None, _) => 0,
+        // A count-down that goes up, or other rotations, make a new cue; its lead is the time
+        // it gives. (A count that stays put is the live clock's rounding, not a new cue.)
+        let moved = self
+            .key_raw
+            .iter()
+            .zip(&self.target_raw)
+            .any(|(a, b)| (a - b).abs() > 1e-5);
+        let new_cue = match (key, self.last_frames_to_go) {
+            (Some(f), Some(last)) => f > last || moved,
+            (Some(_), None) => true,
+            (None, _) => false,
         };
+        if (new_cue || key.is_none()) && self.blend_last > 0.0 {
+            // The cue blended in so far is let go from where it stood: reached, cleared or
+            // replaced, the pose shown never jumps.
+            self.released_raw = self.target_raw;
+            self.release_from = self.blend_last;
+            self.since_release = 0;
+            self.blend_last = 0.0;
+        }
+        match key {
+            Some(f) if new_cue => {
+                self.key_lead = f.saturating_add(1);
+                self.target_raw.copy_from_slice(&self.key_raw);
+            }
+            Some(_) => {}
+            None => self.key_lead = 0,
+        }
         self.last_frames_to_go = key;
         let overlay = self.nets.key_blend
             && self.key_blend_frames > 0
@@ -489,40 +520,38 @@ impl MotionSource for NeuralDancer {
                 key.filter(|&f| f < frames)
                     .map(|ftg| smoothstep(1.0 - ftg as f32 / frames as f32))
             };
-            self.since_key = match key {
-                Some(0) => 0,
-                Some(_) => u32::MAX,
-                None => self.since_key.saturating_add(1),
-            };
-            let release = (overlay && self.since_key > 0 && self.since_key < KEY_RELEASE_FRAMES)
-                .then(|| smoothstep(1.0 - self.since_key as f32 / KEY_RELEASE_FRAMES as f32));
+            self.since_release = self.since_release.saturating_add(1);
+            let release = (overlay && self.since_release < KEY_RELEASE_FRAMES)
+                .then(|| {
+                    let x = 1.0 - self.since_release as f32 / KEY_RELEASE_FRAMES as f32;
+                    self.release_from * smoothstep(x)
+                })
+                .filter(|&r| r > 0.0);
             let let_go = arrival(self.key_blend_frames.max(KEY_BLEND_FRAMES))
-                .or(release)
-                .unwrap_or(0.0);
-            let blend = arrival(self.key_blend_frames)
-                .or(release)
-                .filter(|_| self.nets.key_blend);
+                .unwrap_or(0.0)
+                .max(release.unwrap_or(0.0));
+            let blend = arrival(self.key_blend_frames).filter(|_| self.nets.key_blend);
+            self.blend_last = blend.unwrap_or(0.0);
             self.shown = self.features;
-            if let Some(w) = blend {
+            // Both are heading-free 6D rotations, blended along the arc between them (a straight
+            // line between two 6D rotations far apart turns fastest halfway): first off the
+            // key let go, then onto the key due.
+            for (w, target) in [(release, &self.released_raw), (blend, &self.target_raw)] {
+                if let Some(w) = w {
+                    slerp_rotations(
+                        &mut self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM],
+                        target,
+                        w,
+                    );
+                }
+            }
+            if blend.is_some() || release.is_some() {
                 self.counts.key_blended += 1;
-                // Both are heading-free 6D rotations, blended along the arc between them (a
-                // straight line between two 6D rotations far apart turns fastest halfway).
+            }
+            if blend.is_some() && !overlay {
                 // Routed to the network, the blend is fed back so that it sees itself arrive;
                 // as an overlay the network keeps its own dance under it.
-                for (f, k) in self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
-                    .chunks_exact_mut(ROTATION_DIM)
-                    .zip(self.key_raw.chunks_exact(ROTATION_DIM))
-                {
-                    let mut from = [0.0; ROTATION_DIM];
-                    let mut to = [0.0; ROTATION_DIM];
-                    from.copy_from_slice(f);
-                    to.copy_from_slice(k);
-                    let q = sixd_to_quat(from).slerp(sixd_to_quat(to), w);
-                    f.copy_from_slice(&quat_to_6d(q));
-                }
-                if !overlay {
-                    self.features = self.shown;
-                }
+                self.features = self.shown;
             }
             self.norm.pose(&self.features, &mut self.sample);
             self.decoder.decode_frame(&self.shown, out);
@@ -579,7 +608,8 @@ impl MotionSource for NeuralDancer {
         self.counts = SafetyCounts::default();
         self.mean_speed_mps = 0.0;
         self.glide_left = 0;
-        self.since_key = u32::MAX;
+        self.blend_last = 0.0;
+        self.since_release = u32::MAX;
         self.key_lead = 0;
         self.last_frames_to_go = None;
         self.foot_lock.reset();
@@ -621,6 +651,21 @@ fn normalised_clip(norm: &Normalizer, motion: &[f32], music: &[f32]) -> (Vec<f32
 /// A beat accent depth in [0, 0.9] (non-finite: 0).
 fn clean_accent(depth: f32) -> f32 {
     finite_clamp(depth, 0.0, 0.9)
+}
+
+/// Turns each 6D rotation of `rotations` the fraction `w` of the way along the arc to the
+/// same joint's in `target`.
+fn slerp_rotations(rotations: &mut [f32], target: &[f32], w: f32) {
+    for (f, k) in rotations
+        .chunks_exact_mut(ROTATION_DIM)
+        .zip(target.chunks_exact(ROTATION_DIM))
+    {
+        let mut from = [0.0; ROTATION_DIM];
+        let mut to = [0.0; ROTATION_DIM];
+        from.copy_from_slice(f);
+        to.copy_from_slice(k);
+        f.copy_from_slice(&quat_to_6d(sixd_to_quat(from).slerp(sixd_to_quat(to), w)));
+    }
 }
 
 #[cfg(test)]
@@ -911,10 +956,10 @@ mod tests {
         assert_eq!(shipped.frames, 300);
         assert_eq!(shipped.accented, 300, "{shipped:?}");
         assert!(shipped.speed_limited > 100, "{shipped:?}");
-        // 49 of every 80 frames are under 50 frames from the deadline (1..=49 to go), and 29
-        // of the last 60 (49..=21 to go).
+        // The first cue is blended over its last 49 frames (49..=1 to go); each later one
+        // begins by letting the last go over 49 frames, so from frame 80 on every frame blends.
         assert_eq!(shipped.held, 0, "{shipped:?}");
-        assert_eq!(shipped.key_blended, 3 * 49 + 29, "{shipped:?}");
+        assert_eq!(shipped.key_blended, 49 + 220, "{shipped:?}");
         let alone = run(SafetyNets::NETWORK_ONLY);
         assert_eq!(
             alone,
@@ -1036,13 +1081,14 @@ mod tests {
 
     #[test]
     fn an_overlaid_key_pose_leaves_the_dance_under_it_untouched() {
-        let target = Quat::from_rotation_x(0.8);
-        let mut rotations = [Quat::IDENTITY; 22];
-        for r in rotations.iter_mut().skip(1) {
-            *r = target;
-        }
-        // A cue announced at frame 20, due at frame 100; every pose shown, with and without it.
-        let run = |cue: bool| {
+        let cue = |rotations, due: u32, i: u32| {
+            Some(KeyPoseTarget {
+                rotations,
+                frames_to_go: due - i,
+            })
+        };
+        // Every pose shown over 200 frames, with the cues `cues` gives each frame.
+        let run = |cues: &dyn Fn(u32) -> Option<KeyPoseTarget>| {
             let mut d = dancer(0.05);
             d.set_foot_lock(0.0);
             d.reset(2);
@@ -1050,13 +1096,9 @@ mod tests {
             let mut pose = Pose::rest();
             (0..200u32)
                 .map(|i| {
-                    let key_pose = (cue && (20..=100).contains(&i)).then_some(KeyPoseTarget {
-                        rotations,
-                        frames_to_go: 100u32.saturating_sub(i),
-                    });
                     let controls = Controls {
                         temperature: 0.0,
-                        key_pose,
+                        key_pose: cues(i),
                         ..Controls::default()
                     };
                     d.step(&music, &controls, &mut pose);
@@ -1064,7 +1106,27 @@ mod tests {
                 })
                 .collect::<Vec<_>>()
         };
-        let (cued, free) = (run(true), run(false));
+        let free = run(&|_| None);
+        // Key poses 0.8 rad from the dance's own at frames 100 and 140 in every joint but the
+        // hips (a pose half a turn away from the one shown has no shortest way there).
+        let pose_of = |frame: usize, turn: Quat| {
+            let mut r = [Quat::IDENTITY; 22];
+            for (j, q) in r.iter_mut().enumerate().skip(1) {
+                *q = free[frame].local_rotations[j] * turn;
+            }
+            r
+        };
+        let (rotations, other) = (
+            pose_of(100, Quat::from_rotation_x(0.8)),
+            pose_of(140, Quat::from_rotation_y(-0.8)),
+        );
+        // One cue, announced at frame 20 and due at frame 100.
+        let cued = run(&|i| {
+            (20..=100)
+                .contains(&i)
+                .then(|| cue(rotations, 100, i))
+                .flatten()
+        });
         let angle =
             |a: &Pose, b: &Pose, j: usize| a.local_rotations[j].angle_between(b.local_rotations[j]);
         // The blend takes the last 50 frames before the deadline (51..=100), the release the 49
@@ -1090,18 +1152,49 @@ mod tests {
             );
             assert!(angle(&cued[75], &free[75], j) > 0.01, "joint {j} mid-blend");
         }
-        // Onto the key and off it the pose glides: no frame moves a joint by more than the
-        // dance does plus a tenth of the way between the key and the dance.
-        for j in 1..22 {
-            let gap = angle(&key_pose, &free[100], j);
-            assert!(gap > 0.3, "joint {j}: the key is {gap} rad from the dance");
-            let worst = |m: &[Pose], range: std::ops::Range<usize>| {
-                range
-                    .map(|i| angle(&m[i], &m[i - 1], j))
-                    .fold(0.0f32, f32::max)
-            };
-            let (c, f) = (worst(&cued, 51..151), worst(&free, 51..151));
-            assert!(c < f + 0.1 * gap, "joint {j}: {c} rad a frame against {f}");
+        // A cue cleared halfway (frame 80); one replaced halfway by another pose due at 140;
+        // and cues every 60 frames announced 48 ahead, each arriving while the last is let go.
+        let cleared = run(&|i| {
+            (20..80)
+                .contains(&i)
+                .then(|| cue(rotations, 100, i))
+                .flatten()
+        });
+        let replaced = run(&|i| match i {
+            20..80 => cue(rotations, 100, i),
+            80..=140 => cue(other, 140, i),
+            _ => None,
+        });
+        let every_60 = run(&|i| {
+            let due = (i / 60) * 60 + 59;
+            let poses = [rotations, other];
+            (due - i <= 48)
+                .then(|| cue(poses[(i / 60) as usize % 2], due, i))
+                .flatten()
+        });
+        // Onto a key and off it the pose glides: no frame moves a joint by more than the dance
+        // does plus a tenth of the way between the key and the dance.
+        for (name, shown) in [
+            ("one cue", &cued),
+            ("cleared", &cleared),
+            ("replaced", &replaced),
+            ("every 60 frames", &every_60),
+        ] {
+            assert_ne!(shown, &free, "{name}");
+            for j in 1..22 {
+                let gap = angle(&key_pose, &free[100], j);
+                assert!(gap > 0.3, "joint {j}: the key is {gap} rad from the dance");
+                let worst = |m: &[Pose]| {
+                    (10..m.len())
+                        .map(|i| angle(&m[i], &m[i - 1], j))
+                        .fold(0.0f32, f32::max)
+                };
+                let (c, f) = (worst(shown), worst(&free));
+                assert!(
+                    c < f + 0.1 * gap,
+                    "{name}, joint {j}: {c} rad a frame against {f}"
+                );
+            }
         }
     }
 
