@@ -756,14 +756,6 @@ impl MusicSet {
                 row.on_minus_off[b] += on - beat_align(&track, &song.off_beats);
                 row.band_songs[b] += 1;
             }
-            if std::env::var_os("PROBE_QUIET").is_some() {
-                let mut line = format!("PROBE {system} song {i} bpm {:.0}:", song.bpm);
-                for part in &song.quiet {
-                    let (a, b) = speed_inside_and_out(&p, &[*part]);
-                    line += &format!(" [{:.1}-{:.1}] {:.2}", part.0, part.1, a / b);
-                }
-                eprintln!("{line}");
-            }
             if !song.quiet.is_empty() {
                 let (inside, outside) = speed_inside_and_out(&p, &song.quiet);
                 if outside > 0.0 {
