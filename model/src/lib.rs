@@ -7,6 +7,7 @@ pub mod alignment;
 pub mod bvh;
 pub mod clip_file;
 pub mod foot_lock;
+pub mod key_overlay;
 pub mod leg_ik;
 pub mod metrics;
 pub mod motion;

@@ -6,17 +6,18 @@
 //! ground position and heading, so it can be played anywhere. At run time the current clip's
 //! progress *is* the live beat phase (so motion accents land on the live beats whatever the
 //! tempo), and when the live phase wraps the next clip is chosen by a cost: pose continuity,
-//! tempo and energy match, bar position and, when the performer sets one, distance to a key
-//! pose. Clip switches are hidden by decaying the pose offset at the switch to identity
-//! ("inertialization-lite").
+//! tempo and energy match and bar position. Clip switches are hidden by decaying the pose
+//! offset at the switch to identity ("inertialization-lite"). A key pose is shown over the
+//! dance ([`crate::key_overlay`]); the clips are matched to the dance under it.
 
 use dsp::feature::{FEATURE_DIM, FeatureLayout, phase_of};
 use glam::{Quat, Vec3};
 use thiserror::Error;
 
+use crate::key_overlay::{KEY_BLEND_FRAMES, KeyOverlay};
 use crate::motion::{heading, yaw};
 use crate::rig::{JOINT_COUNT, Pose};
-use crate::source::{Controls, KeyPoseTarget, MotionSource};
+use crate::source::{Controls, MotionSource};
 
 /// Frame rate of the library and of the dancer's output (tang2018 fits are 25 fps).
 pub const RETRIEVAL_FPS: f64 = 25.0;
@@ -44,12 +45,8 @@ const W_STILL: f32 = 8.0;
 /// Without it, continuity of rotations alone happily chains a travelling step into a standing
 /// one: the dancer stops crossing the floor and the clip switches show up as root jerks.
 const W_VELOCITY: f32 = 2.0;
-/// Weight of the distance from a candidate's last pose to the key pose, per unit of Σ(1 − |dot|).
-const W_KEY: f32 = 20.0;
 /// Duration of the offset decay at a clip switch, seconds.
 const BLEND_SECONDS: f32 = 0.25;
-/// Frames before a key pose's deadline over which the output is pulled onto it.
-const KEY_BLEND_FRAMES: f32 = 25.0;
 /// Smoothing factor of the live energy (per frame, ≈ 0.4 s time constant at 25 fps).
 const ENERGY_ALPHA: f32 = 0.1;
 
@@ -331,8 +328,8 @@ pub struct RetrievalDancer {
     last_raw: Pose,
     /// Scratch pose for sampling.
     scratch: Pose,
-    /// Whether the last output was pulled towards a key pose.
-    key_active: bool,
+    /// The key pose shown over the dance.
+    overlay: KeyOverlay,
     /// Costs of the cheapest clips found at the last choice.
     best_cost: [f32; TOP_K],
     /// Indices of the cheapest clips found at the last choice.
@@ -376,7 +373,7 @@ impl RetrievalDancer {
             prev_out: Pose::rest(),
             last_raw: Pose::rest(),
             scratch: Pose::rest(),
-            key_active: false,
+            overlay: KeyOverlay::default(),
             best_cost: [f32::INFINITY; TOP_K],
             best_idx: [0; TOP_K],
         };
@@ -444,14 +441,7 @@ impl RetrievalDancer {
     }
 
     /// The cost of playing `clip` next, given the last output's rotations (hips de-headed).
-    fn cost(
-        &self,
-        clip: &Clip,
-        hips: Quat,
-        velocity: Vec3,
-        key: Option<&KeyPoseTarget>,
-        key_hips: Quat,
-    ) -> f32 {
+    fn cost(&self, clip: &Clip, hips: Quat, velocity: Vec3) -> f32 {
         let lib = &self.library;
         let mut c = W_POSE
             * pose_distance(
@@ -481,10 +471,6 @@ impl RetrievalDancer {
             let d = Vec3::new(played.x - velocity.x, 0.0, played.z - velocity.z);
             c += W_VELOCITY * d.length();
         }
-        if let Some(k) = key {
-            c +=
-                W_KEY * pose_distance(&k.rotations, key_hips, &lib.last_pose(clip).local_rotations);
-        }
         c
     }
 
@@ -495,12 +481,10 @@ impl RetrievalDancer {
         let velocity = yaw(-heading(self.last_out.local_rotations[0]))
             * (self.last_out.root_position - self.prev_out.root_position)
             * RETRIEVAL_FPS as f32;
-        let key = controls.key_pose.as_ref();
-        let key_hips = key.map_or(Quat::IDENTITY, |k| deheaded(k.rotations[0]));
         self.best_cost = [f32::INFINITY; TOP_K];
         self.best_idx = [0; TOP_K];
         for i in 0..self.library.clips.len() {
-            let c = self.cost(&self.library.clips[i], hips, velocity, key, key_hips);
+            let c = self.cost(&self.library.clips[i], hips, velocity);
             let c = if c.is_finite() { c } else { f32::MAX };
             if c >= self.best_cost[TOP_K - 1] {
                 continue;
@@ -626,10 +610,6 @@ impl MotionSource for RetrievalDancer {
         } else {
             self.sample_world();
         }
-        // Leaving a key pose is a discontinuity too: blend out of it like a clip switch.
-        if self.key_active && controls.key_pose.is_none() {
-            self.capture_offsets();
-        }
         self.last_raw = self.scratch;
 
         let blend_frames = BLEND_SECONDS * RETRIEVAL_FPS as f32;
@@ -645,26 +625,28 @@ impl MotionSource for RetrievalDancer {
         }
         self.blend_frame = self.blend_frame.saturating_add(1);
 
-        self.key_active = false;
-        if let Some(k) = &controls.key_pose {
-            let ftg = k.frames_to_go as f32;
-            if ftg < KEY_BLEND_FRAMES {
-                let x = 1.0 - ftg / KEY_BLEND_FRAMES;
-                let kw = x * x * (3.0 - 2.0 * x);
-                let h = heading(out.local_rotations[0]);
-                for j in 0..JOINT_COUNT {
-                    let target = if j == 0 {
-                        yaw(h) * deheaded(k.rotations[0])
-                    } else {
-                        k.rotations[j]
-                    };
-                    let target = target.normalize();
-                    if target.is_finite() {
-                        out.local_rotations[j] =
-                            out.local_rotations[j].slerp(target, kw).normalize();
-                    }
+        // The key is shown over the dance: clip matching and switch offsets follow the dance
+        // alone (following the blended pose, every switch during a blend applied the key twice).
+        let dance = *out;
+        self.overlay.read_cue(controls.key_pose.as_ref());
+        let frames_to_go = controls.key_pose.map(|k| k.frames_to_go);
+        let weights = self.overlay.weights(frames_to_go, KEY_BLEND_FRAMES, true);
+        let h = heading(dance.local_rotations[0]);
+        for (w, key) in [
+            (weights.release, self.overlay.released()),
+            (weights.blend, self.overlay.target()),
+        ] {
+            let Some(w) = w else { continue };
+            for j in 0..JOINT_COUNT {
+                let target = if j == 0 {
+                    yaw(h) * deheaded(key[0])
+                } else {
+                    key[j]
+                };
+                let target = target.normalize();
+                if target.is_finite() {
+                    out.local_rotations[j] = out.local_rotations[j].slerp(target, w).normalize();
                 }
-                self.key_active = true;
             }
         }
         if !out.is_finite() {
@@ -672,7 +654,7 @@ impl MotionSource for RetrievalDancer {
             *out = self.last_out;
         }
         self.prev_out = self.last_out;
-        self.last_out = *out;
+        self.last_out = if dance.is_finite() { dance } else { *out };
     }
 
     fn reset(&mut self, seed: u64) {
@@ -693,7 +675,7 @@ impl MotionSource for RetrievalDancer {
         self.last_out = Pose::rest();
         self.prev_out = Pose::rest();
         self.last_raw = Pose::rest();
-        self.key_active = false;
+        self.overlay.reset();
     }
 
     fn reseed(&mut self, seed: u64) {
@@ -707,6 +689,7 @@ mod tests {
     use super::*;
     use crate::rig::Joint;
     use crate::rotation::twist_angle;
+    use crate::source::KeyPoseTarget;
     use std::f32::consts::{PI, TAU};
 
     /// One frame of synthetic music at `beats` beats since the start (4 beats to the bar).

@@ -13,6 +13,7 @@
 use dsp::feature::{FEATURE_DIM, FeatureLayout};
 
 use crate::foot_lock::{self, FootLock};
+use crate::key_overlay::KeyOverlay;
 use crate::motion::{
     MOTION_FEATURE_DIM, MotionDecoder, ROOT_DFACING, ROOT_DX, ROOT_DZ, ROTATION_DIM, ROTATIONS,
     RootState,
@@ -39,15 +40,7 @@ pub const RANGE_MARGIN: f32 = 0.05;
 /// constant.
 pub const CONSTANT_FEATURE_RANGE: f32 = 1e-3;
 
-/// Most frames before a key pose's deadline over which the rotations shown are pulled onto it
-/// (smoothstep; a cue announced later is blended over the time it gives), as the retrieval
-/// dancer does: the performer's cue lands even where the network alone would arrive late or
-/// near. 0 turns it off.
-pub const KEY_BLEND_FRAMES: u32 = 50;
-
-/// Frames over which the rotations shown glide from a key pose back to the network's own dance
-/// after its deadline, when the key is shown over the dance ([`KeyPoseRoute::Overlay`]).
-pub const KEY_RELEASE_FRAMES: u32 = 50;
+pub use crate::key_overlay::{KEY_BLEND_FRAMES, KEY_RELEASE_FRAMES};
 
 /// Where a key pose goes while the end blend is on. With the blend off (or its frames 0) the
 /// key always goes to the network: nothing else would bring it.
@@ -128,17 +121,9 @@ pub struct NeuralDancer {
     counts: SafetyCounts,
     key_blend_frames: u32,
     key_route: KeyPoseRoute,
-    /// The rotations of the cue being blended in (raw 6D), and of the one being let go.
-    target_raw: [f32; KEY_ROT_DIM],
-    released_raw: [f32; KEY_ROT_DIM],
-    /// The blend's weight on the last frame, the release's weight when it began, and the
-    /// frames since it began (`u32::MAX`: none).
-    blend_last: f32,
-    release_from: f32,
-    since_release: u32,
-    /// Frames from the current cue's announcement to its deadline, and its last count-down.
-    key_lead: u32,
-    last_frames_to_go: Option<u32>,
+    /// The key pose shown over the dance, and the rotations let go (raw 6D).
+    overlay: KeyOverlay,
+    released_raw: Vec<f32>,
     /// The features decoded into the pose shown (the network's, or blended onto a key).
     shown: [f32; MOTION_FEATURE_DIM],
     beat_accent: f32,
@@ -218,13 +203,8 @@ impl NeuralDancer {
             counts: SafetyCounts::default(),
             key_blend_frames: KEY_BLEND_FRAMES,
             key_route: KeyPoseRoute::Overlay,
-            target_raw: [0.0; KEY_ROT_DIM],
-            released_raw: [0.0; KEY_ROT_DIM],
-            blend_last: 0.0,
-            release_from: 0.0,
-            since_release: u32::MAX,
-            key_lead: 0,
-            last_frames_to_go: None,
+            overlay: KeyOverlay::default(),
+            released_raw: vec![0.0; KEY_ROT_DIM],
             shown: [0.0; MOTION_FEATURE_DIM],
             beat_accent: BEAT_ACCENT,
             glide_from: Pose::rest(),
@@ -421,35 +401,7 @@ impl MotionSource for NeuralDancer {
             self.norm.key(&self.key_raw, &mut self.key);
             k.frames_to_go
         });
-        // A count-down that goes up, or other rotations, make a new cue; its lead is the time
-        // it gives. (A count that stays put is the live clock's rounding, not a new cue.)
-        let moved = self
-            .key_raw
-            .iter()
-            .zip(&self.target_raw)
-            .any(|(a, b)| (a - b).abs() > 1e-5);
-        let new_cue = match (key, self.last_frames_to_go) {
-            (Some(f), Some(last)) => f > last || moved,
-            (Some(_), None) => true,
-            (None, _) => false,
-        };
-        if (new_cue || key.is_none()) && self.blend_last > 0.0 {
-            // The cue blended in so far is let go from where it stood: reached, cleared or
-            // replaced, the pose shown never jumps.
-            self.released_raw = self.target_raw;
-            self.release_from = self.blend_last;
-            self.since_release = 0;
-            self.blend_last = 0.0;
-        }
-        match key {
-            Some(f) if new_cue => {
-                self.key_lead = f.saturating_add(1);
-                self.target_raw.copy_from_slice(&self.key_raw);
-            }
-            Some(_) => {}
-            None => self.key_lead = 0,
-        }
-        self.last_frames_to_go = key;
+        self.overlay.read_cue(controls.key_pose.as_ref());
         let overlay = self.nets.key_blend
             && self.key_blend_frames > 0
             && self.key_route == KeyPoseRoute::Overlay;
@@ -509,46 +461,37 @@ impl MotionSource for NeuralDancer {
                     }
                 }
             }
-            // How far into a key pose's arrival this frame is (smoothstep over the blend's
-            // frames, or the cue's lead where that is shorter): the end blend's weight, and how
+            // How far into a key pose's arrival this frame is: the end blend's weight, and how
             // much of a held foot lets go (a leg bent to hold its toe would bend the key pose
             // too, blended or not).
-            let lead = self.key_lead;
-            let smoothstep = |x: f32| x * x * (3.0 - 2.0 * x);
-            let arrival = |frames: u32| {
-                let frames = frames.min(lead);
-                key.filter(|&f| f < frames)
-                    .map(|ftg| smoothstep(1.0 - ftg as f32 / frames as f32))
+            let frames = if self.nets.key_blend {
+                self.key_blend_frames
+            } else {
+                0
             };
-            self.since_release = self.since_release.saturating_add(1);
-            let release = (overlay && self.since_release < KEY_RELEASE_FRAMES)
-                .then(|| {
-                    let x = 1.0 - self.since_release as f32 / KEY_RELEASE_FRAMES as f32;
-                    self.release_from * smoothstep(x)
-                })
-                .filter(|&r| r > 0.0);
-            let let_go = arrival(self.key_blend_frames.max(KEY_BLEND_FRAMES))
+            let weights = self.overlay.weights(key, frames, overlay);
+            let let_go = self
+                .overlay
+                .arrival(key, self.key_blend_frames.max(KEY_BLEND_FRAMES))
                 .unwrap_or(0.0)
-                .max(release.unwrap_or(0.0));
-            let blend = arrival(self.key_blend_frames).filter(|_| self.nets.key_blend);
-            self.blend_last = blend.unwrap_or(0.0);
+                .max(weights.release.unwrap_or(0.0));
             self.shown = self.features;
             // Both are heading-free 6D rotations, blended along the arc between them (a straight
             // line between two 6D rotations far apart turns fastest halfway): first off the
             // key let go, then onto the key due.
-            for (w, target) in [(release, &self.released_raw), (blend, &self.target_raw)] {
-                if let Some(w) = w {
-                    slerp_rotations(
-                        &mut self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM],
-                        target,
-                        w,
-                    );
-                }
+            if let Some(w) = weights.release {
+                token::key_rotations(self.overlay.released(), &mut self.released_raw);
+                let shown = &mut self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM];
+                slerp_rotations(shown, &self.released_raw, w);
             }
-            if blend.is_some() || release.is_some() {
+            if let Some(w) = weights.blend {
+                let shown = &mut self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM];
+                slerp_rotations(shown, &self.key_raw, w);
+            }
+            if weights.acts() {
                 self.counts.key_blended += 1;
             }
-            if blend.is_some() && !overlay {
+            if weights.blend.is_some() && !overlay {
                 // Routed to the network, the blend is fed back so that it sees itself arrive;
                 // as an overlay the network keeps its own dance under it.
                 self.features = self.shown;
@@ -608,10 +551,7 @@ impl MotionSource for NeuralDancer {
         self.counts = SafetyCounts::default();
         self.mean_speed_mps = 0.0;
         self.glide_left = 0;
-        self.blend_last = 0.0;
-        self.since_release = u32::MAX;
-        self.key_lead = 0;
-        self.last_frames_to_go = None;
+        self.overlay.reset();
         self.foot_lock.reset();
     }
 

@@ -1,0 +1,144 @@
+//! A key pose shown over a dance: how far the pose shown is turned onto the key due, and off
+//! the one let go, frame by frame. The dance under it goes on untouched; each dancer applies
+//! the weights to its own pose.
+//!
+//! The turn onto a key takes its last [`KEY_BLEND_FRAMES`] frames (or the whole of a shorter
+//! lead), smoothstep; a key reached, cleared or replaced is let go from wherever its blend stood
+//! over [`KEY_RELEASE_FRAMES`], so the pose shown never jumps.
+
+use glam::Quat;
+
+use crate::rig::JOINT_COUNT;
+use crate::source::KeyPoseTarget;
+
+/// Most frames before a key pose's deadline over which the rotations shown are turned onto it.
+pub const KEY_BLEND_FRAMES: u32 = 50;
+
+/// Frames over which the rotations shown glide from a key pose back onto the dance.
+pub const KEY_RELEASE_FRAMES: u32 = 50;
+
+/// The state of a key pose shown over a dance.
+#[derive(Clone, Debug)]
+pub struct KeyOverlay {
+    /// Frames from the current cue's announcement to its deadline, and its last count-down.
+    lead: u32,
+    last_frames_to_go: Option<u32>,
+    /// The rotations of the cue being blended in, and of the one being let go.
+    target: [Quat; JOINT_COUNT],
+    released: [Quat; JOINT_COUNT],
+    /// The blend's weight on the last frame, the release's when it began, and the frames since
+    /// it began (`u32::MAX`: none).
+    blend_last: f32,
+    release_from: f32,
+    since_release: u32,
+}
+
+/// This frame's weights: how far the pose shown turns off the key let go, then onto the key due
+/// (`None`: not at all).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OverlayWeights {
+    /// Towards [`KeyOverlay::released`].
+    pub release: Option<f32>,
+    /// Towards [`KeyOverlay::target`].
+    pub blend: Option<f32>,
+}
+
+impl OverlayWeights {
+    /// Whether either weight acts this frame.
+    pub fn acts(&self) -> bool {
+        self.release.is_some() || self.blend.is_some()
+    }
+}
+
+impl Default for KeyOverlay {
+    fn default() -> Self {
+        KeyOverlay {
+            lead: 0,
+            last_frames_to_go: None,
+            target: [Quat::IDENTITY; JOINT_COUNT],
+            released: [Quat::IDENTITY; JOINT_COUNT],
+            blend_last: 0.0,
+            release_from: 0.0,
+            since_release: u32::MAX,
+        }
+    }
+}
+
+fn smoothstep(x: f32) -> f32 {
+    x * x * (3.0 - 2.0 * x)
+}
+
+impl KeyOverlay {
+    /// Forgets every cue.
+    pub fn reset(&mut self) {
+        *self = KeyOverlay::default();
+    }
+
+    /// Reads this frame's cue. A count-down that goes up, or other rotations, make a new cue
+    /// (a count that stays put is the live clock's rounding); the cue blended in so far is let
+    /// go when it is reached, cleared or replaced.
+    pub fn read_cue(&mut self, key: Option<&KeyPoseTarget>) {
+        let new_cue = match (key, self.last_frames_to_go) {
+            (Some(k), Some(last)) => k.frames_to_go > last || k.rotations != self.target,
+            (Some(_), None) => true,
+            (None, _) => false,
+        };
+        if (new_cue || key.is_none()) && self.blend_last > 0.0 {
+            self.released = self.target;
+            self.release_from = self.blend_last;
+            self.since_release = 0;
+            self.blend_last = 0.0;
+        }
+        match key {
+            Some(k) if new_cue => {
+                self.lead = k.frames_to_go.saturating_add(1);
+                self.target = k.rotations;
+            }
+            Some(_) => {}
+            None => self.lead = 0,
+        }
+        self.last_frames_to_go = key.map(|k| k.frames_to_go);
+    }
+
+    /// How far into the current cue's arrival this frame is, blended over at most `frames`
+    /// frames (smoothstep), with `frames_to_go` left; `None` before the blend begins.
+    pub fn arrival(&self, frames_to_go: Option<u32>, frames: u32) -> Option<f32> {
+        let frames = frames.min(self.lead);
+        frames_to_go
+            .filter(|&f| f < frames)
+            .map(|f| smoothstep(1.0 - f as f32 / frames as f32))
+    }
+
+    /// Advances one shown frame and returns its weights: the blend over at most `blend_frames`
+    /// frames, and the release where `release` (the dance is shown under the key, not fed it).
+    pub fn weights(
+        &mut self,
+        frames_to_go: Option<u32>,
+        blend_frames: u32,
+        release: bool,
+    ) -> OverlayWeights {
+        self.since_release = self.since_release.saturating_add(1);
+        let released = (release && self.since_release < KEY_RELEASE_FRAMES)
+            .then(|| {
+                let x = 1.0 - self.since_release as f32 / KEY_RELEASE_FRAMES as f32;
+                self.release_from * smoothstep(x)
+            })
+            .filter(|&r| r > 0.0);
+        let blend = self.arrival(frames_to_go, blend_frames);
+        self.blend_last = blend.unwrap_or(0.0);
+        OverlayWeights {
+            release: released,
+            blend,
+        }
+    }
+
+    /// The rotations of the cue being blended in.
+    pub fn target(&self) -> &[Quat; JOINT_COUNT] {
+        &self.target
+    }
+
+    /// The rotations of the cue being let go.
+    pub fn released(&self) -> &[Quat; JOINT_COUNT] {
+        &self.released
+    }
+}
