@@ -142,3 +142,85 @@ impl KeyOverlay {
         &self.released
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cue(angle: f32, frames_to_go: u32) -> KeyPoseTarget {
+        KeyPoseTarget {
+            rotations: [Quat::from_rotation_x(angle); JOINT_COUNT],
+            frames_to_go,
+        }
+    }
+
+    /// Steps `overlay` through `cues` (one per frame) and returns each frame's weights.
+    fn run(overlay: &mut KeyOverlay, cues: &[Option<KeyPoseTarget>]) -> Vec<OverlayWeights> {
+        cues.iter()
+            .map(|c| {
+                overlay.read_cue(c.as_ref());
+                overlay.weights(c.map(|k| k.frames_to_go), KEY_BLEND_FRAMES, true)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_short_lead_is_blended_over_its_whole_length_and_a_long_one_over_the_last_50_frames() {
+        let mut o = KeyOverlay::default();
+        let w = run(
+            &mut o,
+            &(0..=10)
+                .rev()
+                .map(|f| Some(cue(0.5, f)))
+                .collect::<Vec<_>>(),
+        );
+        // Announced 10 frames ahead: blended from the first frame, onto the key at the last.
+        assert!(w[0].blend.unwrap() < 0.05, "{:?}", w[0]);
+        assert_eq!(w[10].blend, Some(1.0));
+        let mut o = KeyOverlay::default();
+        let w = run(
+            &mut o,
+            &(0..=80)
+                .rev()
+                .map(|f| Some(cue(0.5, f)))
+                .collect::<Vec<_>>(),
+        );
+        assert_eq!(w.iter().filter(|w| w.blend.is_some()).count(), 50);
+    }
+
+    #[test]
+    fn a_key_reached_cleared_or_replaced_is_let_go_from_where_its_blend_stood() {
+        // Reached: released from 1 over the next 49 frames, decreasing.
+        let mut o = KeyOverlay::default();
+        let mut cues: Vec<_> = (0..=20).rev().map(|f| Some(cue(0.5, f))).collect();
+        cues.extend(std::iter::repeat_n(None, 60));
+        let w = run(&mut o, &cues);
+        let released: Vec<f32> = w[21..].iter().filter_map(|w| w.release).collect();
+        assert_eq!(released.len(), (KEY_RELEASE_FRAMES - 1) as usize);
+        assert!(released[0] > 0.99 && released.windows(2).all(|p| p[1] < p[0]));
+        assert_eq!(o.released()[0], Quat::from_rotation_x(0.5));
+        // Replaced halfway by another pose due later: the first is released from the weight
+        // it had, the second blended from its own start.
+        let mut o = KeyOverlay::default();
+        let mut cues: Vec<_> = (10..=20).rev().map(|f| Some(cue(0.5, f))).collect();
+        cues.extend((0..=30).rev().map(|f| Some(cue(-0.5, f))));
+        let w = run(&mut o, &cues);
+        let had = w[10].blend.unwrap();
+        assert!(had > 0.3, "{had}");
+        assert!(
+            (w[11].release.unwrap() - had).abs() < 0.01,
+            "{:?} vs {had}",
+            w[11]
+        );
+        assert!(w[11].blend.unwrap() < 0.05, "{:?}", w[11]);
+        assert_eq!(o.target()[0], Quat::from_rotation_x(-0.5));
+        assert_eq!(o.released()[0], Quat::from_rotation_x(0.5));
+        // A count-down that stays put for a frame (the live clock's rounding) is the same cue.
+        let mut o = KeyOverlay::default();
+        let w = run(
+            &mut o,
+            &[Some(cue(0.5, 4)), Some(cue(0.5, 3)), Some(cue(0.5, 3))],
+        );
+        assert!(w.iter().all(|w| w.release.is_none()), "{w:?}");
+    }
+}
