@@ -154,6 +154,14 @@ mod tests {
         }
     }
 
+    /// A cue of `angle` counted down over `frames_to_go`, one frame each.
+    fn countdown(
+        angle: f32,
+        frames_to_go: std::ops::RangeInclusive<u32>,
+    ) -> Vec<Option<KeyPoseTarget>> {
+        frames_to_go.rev().map(|f| Some(cue(angle, f))).collect()
+    }
+
     /// Steps `overlay` through `cues` (one per frame) and returns each frame's weights.
     fn run(overlay: &mut KeyOverlay, cues: &[Option<KeyPoseTarget>]) -> Vec<OverlayWeights> {
         cues.iter()
@@ -167,24 +175,12 @@ mod tests {
     #[test]
     fn a_short_lead_is_blended_over_its_whole_length_and_a_long_one_over_the_last_50_frames() {
         let mut o = KeyOverlay::default();
-        let w = run(
-            &mut o,
-            &(0..=10)
-                .rev()
-                .map(|f| Some(cue(0.5, f)))
-                .collect::<Vec<_>>(),
-        );
+        let w = run(&mut o, &countdown(0.5, 0..=10));
         // Announced 10 frames ahead: blended from the first frame, onto the key at the last.
         assert!(w[0].blend.unwrap() < 0.05, "{:?}", w[0]);
         assert_eq!(w[10].blend, Some(1.0));
         let mut o = KeyOverlay::default();
-        let w = run(
-            &mut o,
-            &(0..=80)
-                .rev()
-                .map(|f| Some(cue(0.5, f)))
-                .collect::<Vec<_>>(),
-        );
+        let w = run(&mut o, &countdown(0.5, 0..=80));
         assert_eq!(w.iter().filter(|w| w.blend.is_some()).count(), 50);
     }
 
@@ -192,7 +188,7 @@ mod tests {
     fn a_key_reached_cleared_or_replaced_is_let_go_from_where_its_blend_stood() {
         // Reached: released from 1 over the next 49 frames, decreasing.
         let mut o = KeyOverlay::default();
-        let mut cues: Vec<_> = (0..=20).rev().map(|f| Some(cue(0.5, f))).collect();
+        let mut cues = countdown(0.5, 0..=20);
         cues.extend(std::iter::repeat_n(None, 60));
         let w = run(&mut o, &cues);
         let released: Vec<f32> = w[21..].iter().filter_map(|w| w.release).collect();
@@ -202,8 +198,8 @@ mod tests {
         // Replaced halfway by another pose due later: the first is released from the weight
         // it had, the second blended from its own start.
         let mut o = KeyOverlay::default();
-        let mut cues: Vec<_> = (10..=20).rev().map(|f| Some(cue(0.5, f))).collect();
-        cues.extend((0..=30).rev().map(|f| Some(cue(-0.5, f))));
+        let mut cues = countdown(0.5, 10..=20);
+        cues.extend(countdown(-0.5, 0..=30));
         let w = run(&mut o, &cues);
         let had = w[10].blend.unwrap();
         assert!(had > 0.3, "{had}");

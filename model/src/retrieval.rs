@@ -239,11 +239,6 @@ impl ClipLibrary {
         &self.poses[clip.start]
     }
 
-    /// The last pose of `clip` (the pose at the next beat).
-    pub fn last_pose(&self, clip: &Clip) -> &Pose {
-        &self.poses[clip.start + clip.len]
-    }
-
     /// Samples `clip` at fractional frame `u` ∈ [0, len] into `out` (clip-relative root).
     fn sample(&self, clip: &Clip, u: f32, out: &mut Pose) {
         let u = u.clamp(0.0, clip.len as f32);

@@ -124,8 +124,6 @@ pub struct NeuralDancer {
     /// The key pose shown over the dance, and the rotations let go (raw 6D).
     overlay: KeyOverlay,
     released_raw: Vec<f32>,
-    /// The features decoded into the pose shown (the network's, or blended onto a key).
-    shown: [f32; MOTION_FEATURE_DIM],
     beat_accent: f32,
     /// Pose the dancer glides from after a restart, and the frames of the glide left.
     glide_from: Pose,
@@ -205,7 +203,6 @@ impl NeuralDancer {
             key_route: KeyPoseRoute::Overlay,
             overlay: KeyOverlay::default(),
             released_raw: vec![0.0; KEY_ROT_DIM],
-            shown: [0.0; MOTION_FEATURE_DIM],
             beat_accent: BEAT_ACCENT,
             glide_from: Pose::rest(),
             glide_left: 0,
@@ -475,18 +472,19 @@ impl MotionSource for NeuralDancer {
                 .arrival(key, self.key_blend_frames.max(KEY_BLEND_FRAMES))
                 .unwrap_or(0.0)
                 .max(weights.release.unwrap_or(0.0));
-            self.shown = self.features;
+            // The features decoded into the pose shown: the network's, or blended onto a key.
+            let mut shown = self.features;
             // Both are heading-free 6D rotations, blended along the arc between them (a straight
             // line between two 6D rotations far apart turns fastest halfway): first off the
             // key let go, then onto the key due.
             if let Some(w) = weights.release {
                 token::key_rotations(self.overlay.released(), &mut self.released_raw);
-                let shown = &mut self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM];
-                slerp_rotations(shown, &self.released_raw, w);
+                let rotations = &mut shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM];
+                slerp_rotations(rotations, &self.released_raw, w);
             }
             if let Some(w) = weights.blend {
-                let shown = &mut self.shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM];
-                slerp_rotations(shown, &self.key_raw, w);
+                let rotations = &mut shown[ROTATIONS..ROTATIONS + KEY_ROT_DIM];
+                slerp_rotations(rotations, &self.key_raw, w);
             }
             if weights.acts() {
                 self.counts.key_blended += 1;
@@ -494,10 +492,10 @@ impl MotionSource for NeuralDancer {
             if weights.blend.is_some() && !overlay {
                 // Routed to the network, the blend is fed back so that it sees itself arrive;
                 // as an overlay the network keeps its own dance under it.
-                self.features = self.shown;
+                self.features = shown;
             }
             self.norm.pose(&self.features, &mut self.sample);
-            self.decoder.decode_frame(&self.shown, out);
+            self.decoder.decode_frame(&shown, out);
             if self.glide_left > 0 {
                 let w = self.glide_left as f32 / (RESTART_BLEND_FRAMES + 1) as f32;
                 for (r, from) in out
