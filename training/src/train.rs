@@ -531,12 +531,10 @@ impl Corpus {
         foreign: f64,
     ) -> Batch {
         let mut batch = Batch::default();
-        let (s, l) = (self.sequence, self.config.lookahead);
+        let s = self.sequence;
         let horizon = horizon.min(s - 1 - at.min(s - 1));
         for _ in 0..sequences {
-            let dance = self.pick_dance(rng);
-            let n = self.dances[dance].frames;
-            let start = 1 + rng.below(n - s - l);
+            let (dance, start) = self.rollout_start(rng);
             let key = Some((at, start + at + horizon));
             self.push_sequence(&mut batch, dance, start, key, None, None);
             // Drawn only when asked for, so runs without foreign keys keep their random stream.
@@ -547,6 +545,26 @@ impl Corpus {
             }
         }
         batch
+    }
+
+    /// A batch of `sequences` clean sequences for a free rollout with no key pose announced
+    /// (dances and starts drawn as [`Corpus::rollout_batch`] draws them): the dancing a
+    /// network does when nobody calls a pose, judged by the frozen critic alone.
+    pub fn free_rollout_batch(&self, rng: &mut Rng, sequences: usize) -> Batch {
+        let mut batch = Batch::default();
+        for _ in 0..sequences {
+            let (dance, start) = self.rollout_start(rng);
+            self.push_sequence(&mut batch, dance, start, None, None, None);
+        }
+        batch
+    }
+
+    /// A rollout sequence's dance and first frame, drawn as [`Corpus::random_batch`] draws them.
+    fn rollout_start(&self, rng: &mut Rng) -> (usize, usize) {
+        let (s, l) = (self.sequence, self.config.lookahead);
+        let dance = self.pick_dance(rng);
+        let n = self.dances[dance].frames;
+        (dance, 1 + rng.below(n - s - l))
     }
 
     /// Every non-overlapping sequence with a key pose announced on its middle token (half a
@@ -1089,6 +1107,68 @@ mod tests {
         assert!(after < 0.5 * before, "key error {before} → {after}");
     }
 
+    /// The critic's full term: every frame, no floor, no fade (to measure with at learning
+    /// rate 0, where it teaches nothing).
+    const FULL_CRITIC: CriticTerm = CriticTerm {
+        weight: 1.0,
+        floor: f32::MIN,
+        fade: false,
+    };
+
+    /// One step on a small teacher-forced batch plus a rollout of `batch` (the same noise every
+    /// time): what it scored.
+    fn rollout_step(
+        corpus: &Corpus,
+        tr: &mut Trainer,
+        batch: &Batch,
+        run: FreeRun,
+        weight: f32,
+        critic: Option<CriticTerm>,
+        lr: f64,
+    ) -> StepLoss {
+        let r = KeyRollout {
+            batch: batch.clone(),
+            run,
+            weight,
+            critic,
+            noise_seed: 9,
+        };
+        let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
+        tr.step(&b, Some(&r), lr, false)
+    }
+
+    /// A copy of `start` with its frozen critic, taught 60 steps of `lesson(critic, lr, ..)`:
+    /// the critic's NLL of the free run ([`FULL_CRITIC`]) before and after. The critic must not
+    /// move.
+    fn critic_lesson(
+        start: &NeuralModel,
+        lesson: &dyn Fn(Option<CriticTerm>, f64, &mut Trainer) -> StepLoss,
+        critic: Option<CriticTerm>,
+    ) -> (f32, f32) {
+        let mut tr = Trainer::new(start.clone()).unwrap().with_critic().unwrap();
+        let measure = |tr: &mut Trainer| {
+            lesson(Some(FULL_CRITIC), 0.0, tr)
+                .keyless_nll
+                .expect("the critic scores the free run")
+        };
+        let before = measure(&mut tr);
+        for _ in 0..60 {
+            lesson(critic, 3e-3, &mut tr);
+        }
+        let after = measure(&mut tr);
+        let mut frozen = NamedTensors::default();
+        tr.critic.as_ref().unwrap().store(&mut frozen);
+        assert!(!frozen.map.is_empty());
+        for (name, value) in &frozen.map {
+            assert_eq!(
+                Some(value),
+                start.tensors.map.get(name),
+                "the critic's {name} moved"
+            );
+        }
+        (before, after)
+    }
+
     #[test]
     fn the_keyless_critic_draws_the_free_run_towards_dancing_and_stays_frozen() {
         let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
@@ -1101,53 +1181,23 @@ mod tests {
         // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
         // off the dance, and only the critic's term can pull it back.
         let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0);
-        let rollout = |critic: Option<CriticTerm>, lr: f64, tr: &mut Trainer| {
-            let r = KeyRollout {
-                batch: batch.clone(),
-                run: FreeRun {
-                    at,
-                    horizon: 8,
-                    temperature: 0.0,
-                    backprop_steps: Some(1),
-                    approach: 4,
-                    bounded: false,
-                },
-                weight: 1.0,
-                critic,
-                noise_seed: 9,
-            };
-            let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
-            let scored = tr.step(&b, Some(&r), lr, false);
+        let run = FreeRun {
+            at,
+            horizon: 8,
+            temperature: 0.0,
+            backprop_steps: Some(1),
+            approach: 4,
+            bounded: false,
+        };
+        let lesson = |critic: Option<CriticTerm>, lr: f64, tr: &mut Trainer| {
+            let scored = rollout_step(&corpus, tr, &batch, run, 1.0, critic, lr);
             assert!(scored.key_error.is_some(), "{scored:?}");
-            scored.keyless_nll
+            scored
         };
-        // Measured by the critic's full term (at learning rate 0 it teaches nothing).
-        let full = CriticTerm {
-            weight: 1.0,
-            floor: f32::MIN,
-            fade: false,
-        };
-        let trained = |critic: Option<CriticTerm>| {
-            let mut tr = Trainer::new(start.clone()).unwrap().with_critic().unwrap();
-            let before = rollout(Some(full), 0.0, &mut tr).expect("the critic scores the free run");
-            for _ in 0..60 {
-                rollout(critic, 3e-3, &mut tr);
-            }
-            let after = rollout(Some(full), 0.0, &mut tr).expect("the critic scores the free run");
-            let mut frozen = NamedTensors::default();
-            tr.critic.as_ref().unwrap().store(&mut frozen);
-            assert!(!frozen.map.is_empty());
-            for (name, value) in &frozen.map {
-                assert_eq!(
-                    Some(value),
-                    start.tensors.map.get(name),
-                    "the critic's {name} moved"
-                );
-            }
-            (before, after)
-        };
+        let trained = |critic| critic_lesson(&start, &lesson, critic);
         // The foreign key pulls the run off the dance either way (the NLL rises from the
         // start); the critic's term holds it nearer.
+        let full = FULL_CRITIC;
         let (before, with_critic) = trained(Some(full));
         let (_, key_alone) = trained(None);
         assert!(
@@ -1163,6 +1213,43 @@ mod tests {
         assert!(
             faded < key_alone - 0.5 && faded != with_critic,
             "faded {faded}, full {with_critic}, without {key_alone}"
+        );
+    }
+
+    #[test]
+    fn a_free_rollout_announces_no_key_and_the_critic_alone_steers_it() {
+        let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
+        for _ in 0..300 {
+            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
+        }
+        let start = tr.model().clone();
+        let batch = corpus.free_rollout_batch(&mut Rng::new(7), 4);
+        assert_eq!(batch.sequences, 4);
+        for tok in batch.tokens.chunks_exact(TOKEN_DIM) {
+            assert!(
+                tok[token::KEY_AT..].iter().all(|&v| v == 0.0),
+                "a free rollout announced a key"
+            );
+        }
+        let run = FreeRun {
+            at: c.window - 1,
+            horizon: 8,
+            temperature: 0.5,
+            backprop_steps: Some(1),
+            approach: 0,
+            bounded: false,
+        };
+        let lesson = |critic: Option<CriticTerm>, lr: f64, tr: &mut Trainer| {
+            rollout_step(&corpus, tr, &batch, run, 0.0, critic, lr)
+        };
+        // With no key to reach, the teacher-forced steps alone carry the free run away from
+        // what the frozen start finds likely (-276 -> -247 nats measured); the critic's term
+        // holds it there (-274).
+        let (before, with_critic) = critic_lesson(&start, &lesson, Some(FULL_CRITIC));
+        let (_, without) = critic_lesson(&start, &lesson, None);
+        assert!(
+            with_critic < without - 0.5,
+            "the free run's NLL under the critic: {before} at the start, {with_critic} trained with the critic, {without} without"
         );
     }
 

@@ -106,7 +106,8 @@ pub struct TrainArgs {
     /// Weight of the key-pose rollouts' NLL under a frozen copy of the weights training
     /// resumed from, with the key hidden from that copy (nats per frame): the approach to a
     /// key must still look like dancing to a dancer that does not know where it is going;
-    /// 0 keeps no copy.
+    /// 0 keeps no copy. With `--key-rollout 0` the rollouts announce no key and this alone
+    /// judges them: free dancing, as the shipped dancer (key poses shown over it) dances.
     #[arg(long, default_value_t = 0.0, requires = "resume")]
     pub rollout_keyless: f64,
     /// Frames of the rollouts the frozen copy finds at least this likely (NLL in nats per
@@ -570,7 +571,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--quiet-passages", args.quiet_passages)
         + &option_if_set("--key-splice", args.key_splice)
         + &option_if_set("--pose-drop", args.pose_drop)
-        + &if args.key_rollout > 0.0 {
+        + &if args.key_rollout > 0.0 || args.rollout_keyless > 0.0 {
             format!(
                 " --key-rollout {} --rollout-sequences {} --rollout-horizon {} --rollout-temperature {}{}",
                 args.key_rollout,
@@ -697,7 +698,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         let progress = by_time.max(by_steps);
         let lr = learning_rate(args.lr, step, progress);
         let batch = corpus.random_batch(&mut rng, args.batch, args.key_drop);
-        let rollout = (args.key_rollout > 0.0).then(|| {
+        let rollout = (args.key_rollout > 0.0 || args.rollout_keyless > 0.0).then(|| {
             // A full window of past before the announcement, as the live dancer has.
             let at = config.window - 1;
             let longest = args
@@ -705,13 +706,17 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 .min(args.sequence.saturating_sub(at + 1));
             let horizon = KEY_HORIZON_MIN + rng.below(longest.saturating_sub(KEY_HORIZON_MIN) + 1);
             KeyRollout {
-                batch: corpus.rollout_batch(
-                    &mut rng,
-                    args.rollout_sequences,
-                    at,
-                    horizon,
-                    args.rollout_foreign,
-                ),
+                batch: if args.key_rollout > 0.0 {
+                    corpus.rollout_batch(
+                        &mut rng,
+                        args.rollout_sequences,
+                        at,
+                        horizon,
+                        args.rollout_foreign,
+                    )
+                } else {
+                    corpus.free_rollout_batch(&mut rng, args.rollout_sequences)
+                },
                 run: FreeRun {
                     at,
                     horizon,
@@ -769,6 +774,10 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 last_val.map_or("-".into(), |v| format!("{v:.2}")),
                 if key_error.is_nan() {
                     String::new()
+                } else if args.key_rollout == 0.0 {
+                    format!(
+                        ", free rollouts: {skipped_rollouts} broke or all exploded, not scored; {exploded_sequences} exploded sequences left out of the others"
+                    )
                 } else {
                     format!(
                         ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts broke or all exploded, not scored; {exploded_sequences} exploded sequences left out of the others)"
