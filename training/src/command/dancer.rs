@@ -238,6 +238,12 @@ fn option_if_set(name: &str, value: f64) -> String {
 }
 
 /// How many rollout steps the key-pose loss reaches back through (None: every step).
+/// Whether each step also free-runs rollouts: towards key poses (`--key-rollout`), or with no
+/// key for the frozen critic alone (`--rollout-keyless` with `--key-rollout 0`).
+fn runs_rollouts(args: &TrainArgs) -> bool {
+    args.key_rollout > 0.0 || args.rollout_keyless > 0.0
+}
+
 fn rollout_backprop(args: &TrainArgs) -> Option<usize> {
     if args.rollout_detach {
         Some(1)
@@ -571,7 +577,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &option_if_set("--quiet-passages", args.quiet_passages)
         + &option_if_set("--key-splice", args.key_splice)
         + &option_if_set("--pose-drop", args.pose_drop)
-        + &if args.key_rollout > 0.0 || args.rollout_keyless > 0.0 {
+        + &if runs_rollouts(args) {
             format!(
                 " --key-rollout {} --rollout-sequences {} --rollout-horizon {} --rollout-temperature {}{}",
                 args.key_rollout,
@@ -698,7 +704,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         let progress = by_time.max(by_steps);
         let lr = learning_rate(args.lr, step, progress);
         let batch = corpus.random_batch(&mut rng, args.batch, args.key_drop);
-        let rollout = (args.key_rollout > 0.0 || args.rollout_keyless > 0.0).then(|| {
+        let rollout = runs_rollouts(args).then(|| {
             // A full window of past before the announcement, as the live dancer has.
             let at = config.window - 1;
             let longest = args
