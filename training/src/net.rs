@@ -280,8 +280,25 @@ impl Net {
     /// back-propagation). A sequence whose pose explodes (beyond ±[`ROLLOUT_EXPLODED`]) goes on
     /// from the mean pose, without a gradient, and is marked not [`FreeRunOutcome::kept`];
     /// None if the flow has become numerically singular, a pose is not finite or every
-    /// sequence exploded.
+    /// sequence exploded. A fully detached run (`backprop_steps` Some(1), unbounded, no
+    /// styles) is replayed ([`Net::replayed_key_rollout`]): the same outcome for the cost of
+    /// one forward pass instead of one a step.
     pub fn key_rollout(
+        &self,
+        tokens: Tensor<3>,
+        styles: Option<Tensor<3>>,
+        run: &FreeRun,
+        rng: &mut model::neural::rng::Rng,
+    ) -> Option<FreeRunOutcome> {
+        if run.backprop_steps == Some(1) && !run.bounded && styles.is_none() {
+            return self.replayed_key_rollout(tokens, run, rng);
+        }
+        self.stepped_key_rollout(tokens, styles, run, rng)
+    }
+
+    /// [`Net::key_rollout`] step by step: every step re-encodes the sequence so far with its
+    /// gradient, so any `backprop_steps`, bound and styles can be honoured.
+    pub fn stepped_key_rollout(
         &self,
         tokens: Tensor<3>,
         styles: Option<Tensor<3>>,
@@ -377,6 +394,133 @@ impl Net {
             key_distance: sum.div_scalar(weights),
             tokens: Tensor::cat(seq, 1),
             poses: Tensor::cat(poses, 1),
+            kept,
+        })
+    }
+
+    /// [`Net::key_rollout`] of a fully detached run, in two passes. When no fed pose carries a
+    /// gradient, the free run itself needs none: the live runtime (loaded with these weights)
+    /// draws it, with the same noise in the same order, at the cost of a cached step a token.
+    /// Then one causal forward pass over the tokens it fed gives every step's context at
+    /// once — the context of token t depends on tokens up to t only, so it is the one the
+    /// step-by-step run re-encoded — and the flow's inverse of each step's noise there gives
+    /// the poses again, now with their gradient. Stepping through burn instead re-encoded the
+    /// whole sequence with its gradient at every one of up to 51 steps: most of a rollout
+    /// step's time.
+    pub fn replayed_key_rollout(
+        &self,
+        tokens: Tensor<3>,
+        run: &FreeRun,
+        rng: &mut model::neural::rng::Rng,
+    ) -> Option<FreeRunOutcome> {
+        const P: usize = MOTION_FEATURE_DIM;
+        let [b, s, _] = tokens.dims();
+        let FreeRun {
+            at,
+            horizon,
+            temperature,
+            approach,
+            ..
+        } = *run;
+        let last = (at + horizon).min(s - 1);
+        if at > last {
+            return None;
+        }
+        let (steps, fed_len) = (last + 1 - at, last + 1);
+        let device = tokens.device();
+        let mut weights = NamedTensors::default();
+        self.store(&mut weights);
+        let mut live =
+            model::neural::runtime::Runtime::new(&weights, self.transformer.config()).ok()?;
+        let host = crate::layers::values(tokens.clone());
+        // Step-major, as the step-by-step run draws it.
+        let noise: Vec<f32> = (0..steps * b * P)
+            .map(|_| temperature * rng.normal())
+            .collect();
+        let mut fed = vec![0.0f32; b * fed_len * TOKEN_DIM];
+        let mut kept = vec![true; b];
+        let mut sampled = [0.0f32; P];
+        let mut pose = [0.0f32; P];
+        for q in 0..b {
+            live.reset();
+            for i in 0..fed_len {
+                let token = &mut fed[(q * fed_len + i) * TOKEN_DIM..][..TOKEN_DIM];
+                token.copy_from_slice(&host[(q * s + i) * TOKEN_DIM..][..TOKEN_DIM]);
+                if i > at {
+                    token[..P].copy_from_slice(&pose);
+                }
+                live.push(token);
+                if i < at {
+                    continue;
+                }
+                live.sample(&noise[((i - at) * b + q) * P..][..P], &mut sampled);
+                // As `leave_out_exploded` and the clamp treat the step-by-step run's poses.
+                if sampled.iter().any(|v| !v.is_finite()) {
+                    return None;
+                }
+                kept[q] &= sampled.iter().all(|v| v.abs() <= ROLLOUT_EXPLODED);
+                for (p, v) in pose.iter_mut().zip(&sampled) {
+                    *p = if kept[q] {
+                        v.clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND)
+                    } else {
+                        0.0
+                    };
+                }
+            }
+        }
+        if !kept.iter().any(|k| *k) {
+            return None;
+        }
+        let key = tokens
+            .narrow(1, at, 1)
+            .reshape([b, TOKEN_DIM])
+            .narrow(1, KEY_AT, KEY_ROT_DIM);
+        let fed = Tensor::<3>::from_data(
+            burn::tensor::TensorData::new(fed, [b, fed_len, TOKEN_DIM]),
+            &device,
+        );
+        let ctx = self.transformer.forward(fed.clone(), None);
+        let ctx = self.flow_context(ctx, fed.clone());
+        let ctx_width = ctx.dims()[1];
+        let ctx = ctx
+            .reshape([b, fed_len, ctx_width])
+            .narrow(1, at, steps)
+            .reshape([b * steps, ctx_width]);
+        let mut z = vec![0.0f32; b * steps * P];
+        for q in 0..b {
+            for g in 0..steps {
+                z[(q * steps + g) * P..][..P].copy_from_slice(&noise[(g * b + q) * P..][..P]);
+            }
+        }
+        let z = Tensor::<2>::from_data(burn::tensor::TensorData::new(z, [b * steps, P]), &device);
+        let poses = self
+            .flow
+            .inverse_within(z, ctx, None)?
+            .reshape([b, steps * P]);
+        let poses = leave_out_exploded(poses, &mut kept)?
+            .clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND)
+            .reshape([b, steps, P]);
+        // 1 on the key frame; with no approach, 0 or less before it.
+        let step_weights: Vec<f32> = (at..=last)
+            .map(|t| 1.0 - (last - t) as f32 / approach.max(1) as f32)
+            .collect();
+        let total: f32 = step_weights.iter().filter(|w| **w > 0.0).sum();
+        if total <= 0.0 {
+            return None;
+        }
+        let distances = key_distance(
+            poses.clone().reshape([b * steps, P]),
+            key.unsqueeze_dim::<3>(1)
+                .repeat_dim(1, steps)
+                .reshape([b * steps, KEY_ROT_DIM]),
+        )
+        .reshape([b, steps]);
+        let w: Vec<f32> = step_weights.iter().map(|w| w.max(0.0) / total).collect();
+        let w = Tensor::<2>::from_data(burn::tensor::TensorData::new(w, [1, steps]), &device);
+        Some(FreeRunOutcome {
+            key_distance: (distances * w).sum_dim(1).reshape([b]),
+            tokens: fed,
+            poses,
             kept,
         })
     }
@@ -645,6 +789,112 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// Every gradient of `loss` on `net`'s weights, in the order the module visits them.
+    fn gradient(net: &Net, loss: Tensor<1>) -> Vec<f32> {
+        struct Collect<'a> {
+            grads: &'a burn::optim::GradientsParams,
+            out: Vec<f32>,
+        }
+        impl burn::module::ModuleVisitor for Collect<'_> {
+            fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+                if let Some(g) = self.grads.get::<D>(param.id) {
+                    self.out.extend(values(g));
+                }
+            }
+        }
+        let grads = burn::optim::GradientsParams::from_grads(loss.backward(), net);
+        let mut c = Collect {
+            grads: &grads,
+            out: Vec::new(),
+        };
+        net.visit(&mut c);
+        c.out
+    }
+
+    #[test]
+    fn a_replayed_rollout_scores_and_teaches_as_the_stepped_one() {
+        for key_to_flow in [false, true] {
+            let c = NetConfig {
+                key_to_flow,
+                ..NetConfig::tiny()
+            };
+            let mut t = init_net(&c, 7);
+            t.perturb(8, 0.03);
+            let device = crate::device::training_device();
+            let net = Net::load(&t, &c, &device).unwrap();
+            // Three sequences, announced after a full window and due 1.5 windows later (the
+            // free run slides the window past the announcement), sampled at T = 0.5.
+            let (b, at, horizon) = (3, c.window - 1, c.window * 3 / 2);
+            let s = at + horizon + 1;
+            let mut r = Rng::new(12);
+            let mut tokens: Vec<f32> = (0..b * s * TOKEN_DIM).map(|_| 0.5 * r.normal()).collect();
+            for (i, tok) in tokens.chunks_exact_mut(TOKEN_DIM).enumerate() {
+                let announced = i % s >= at;
+                tok[FLAG_AT] = f32::from(u8::from(announced));
+                if !announced {
+                    tok[KEY_AT..KEY_AT + KEY_ROT_DIM].fill(0.0);
+                }
+            }
+            let tt = Tensor::<3>::from_data(TensorData::new(tokens, [b, s, TOKEN_DIM]), &device);
+            let run = FreeRun {
+                at,
+                horizon,
+                temperature: 0.5,
+                backprop_steps: Some(1),
+                approach: 8,
+                bounded: false,
+            };
+            let stepped = net
+                .stepped_key_rollout(tt.clone(), None, &run, &mut Rng::new(3))
+                .unwrap();
+            let replayed = net
+                .replayed_key_rollout(tt.clone(), &run, &mut Rng::new(3))
+                .unwrap();
+            assert_eq!(stepped.kept, replayed.kept);
+            let worst = |a: Vec<f32>, b: Vec<f32>| {
+                assert_eq!(a.len(), b.len());
+                a.iter()
+                    .zip(&b)
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0, f32::max)
+            };
+            let fed = worst(
+                values(stepped.tokens.clone()),
+                values(replayed.tokens.clone()),
+            );
+            assert!(
+                fed < 1e-4,
+                "key_to_flow {key_to_flow}: fed tokens differ by {fed}"
+            );
+            let poses = worst(
+                values(stepped.poses.clone()),
+                values(replayed.poses.clone()),
+            );
+            assert!(
+                poses < 1e-4,
+                "key_to_flow {key_to_flow}: poses differ by {poses}"
+            );
+            let d = (
+                values(stepped.key_distance.clone()),
+                values(replayed.key_distance.clone()),
+            );
+            assert!(worst(d.0.clone(), d.1.clone()) < 1e-4 * d.0[0], "{d:?}");
+            // Scored on every step's pose too, so every step's context must carry the gradient.
+            let loss = |o: FreeRunOutcome| o.key_distance.sum() + o.poses.sum().mul_scalar(0.1);
+            let (g_stepped, g_replayed) = (
+                gradient(&net, loss(stepped)),
+                gradient(&net, loss(replayed)),
+            );
+            let scale = g_stepped.iter().fold(0.0f32, |m, g| m.max(g.abs()));
+            assert!(scale > 1e-3, "no gradient to compare: {scale}");
+            let off = worst(g_stepped, g_replayed);
+            assert!(
+                off < 1e-3 * scale,
+                "key_to_flow {key_to_flow}: gradients differ by {off} (largest {scale})"
+            );
         }
     }
 

@@ -117,6 +117,11 @@ impl Transformer {
         })
     }
 
+    /// The network's sizes.
+    pub fn config(&self) -> &NetConfig {
+        &self.config
+    }
+
     /// The width of its context vectors (`d_model`).
     pub fn width(&self) -> usize {
         self.config.d_model
