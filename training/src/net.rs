@@ -74,8 +74,9 @@ pub struct FreeRunOutcome {
     /// The poses sampled, one per token from the announcement on, `[b, horizon + 1,
     /// MOTION_FEATURE_DIM]`, with their gradient.
     pub poses: Tensor<3>,
-    /// Per sequence, whether its free run stayed within ±[`ROLLOUT_EXPLODED`]; one that did
-    /// not went on from the mean pose, without a gradient, and is not to be scored.
+    /// Per sequence, whether its free run stayed within ±[`ROLLOUT_EXPLODED`] (and, replayed,
+    /// finite); one that did not went on from the mean pose, without a gradient, and is not to
+    /// be scored.
     pub kept: Vec<bool>,
 }
 
@@ -454,10 +455,8 @@ impl Net {
                     continue;
                 }
                 live.sample(&noise[((i - at) * b + q) * P..][..P], &mut sampled);
-                // As `leave_out_exploded` and the clamp treat the step-by-step run's poses.
-                if sampled.iter().any(|v| !v.is_finite()) {
-                    return None;
-                }
+                // As `leave_out_exploded` and the clamp treat the step-by-step run's poses,
+                // except that a pose that is not finite leaves out its sequence, not the run.
                 kept[q] &= sampled.iter().all(|v| v.abs() <= ROLLOUT_EXPLODED);
                 for (p, v) in pose.iter_mut().zip(&sampled) {
                     *p = if kept[q] {
@@ -468,17 +467,25 @@ impl Net {
                 }
             }
         }
-        if !kept.iter().any(|k| *k) {
-            return None;
+        // A left-out sequence is scored as a copy of a kept one, so no value that is not
+        // finite enters the graph (its zero gradient times an infinite one would be NaN);
+        // it weighs nothing.
+        let donor = kept.iter().position(|k| *k)?;
+        for q in (0..b).filter(|&q| !kept[q]) {
+            fed.copy_within(
+                donor * fed_len * TOKEN_DIM..(donor + 1) * fed_len * TOKEN_DIM,
+                q * fed_len * TOKEN_DIM,
+            );
         }
-        let key = tokens
-            .narrow(1, at, 1)
-            .reshape([b, TOKEN_DIM])
-            .narrow(1, KEY_AT, KEY_ROT_DIM);
         let fed = Tensor::<3>::from_data(
             burn::tensor::TensorData::new(fed, [b, fed_len, TOKEN_DIM]),
             &device,
         );
+        let key =
+            fed.clone()
+                .narrow(1, at, 1)
+                .reshape([b, TOKEN_DIM])
+                .narrow(1, KEY_AT, KEY_ROT_DIM);
         let ctx = self.transformer.forward(fed.clone(), None);
         let ctx = self.flow_context(ctx, fed.clone());
         let ctx_width = ctx.dims()[1];
@@ -488,8 +495,9 @@ impl Net {
             .reshape([b * steps, ctx_width]);
         let mut z = vec![0.0f32; b * steps * P];
         for q in 0..b {
+            let from = if kept[q] { q } else { donor };
             for g in 0..steps {
-                z[(q * steps + g) * P..][..P].copy_from_slice(&noise[(g * b + q) * P..][..P]);
+                z[(q * steps + g) * P..][..P].copy_from_slice(&noise[(g * b + from) * P..][..P]);
             }
         }
         let z = Tensor::<2>::from_data(burn::tensor::TensorData::new(z, [b * steps, P]), &device);
@@ -896,6 +904,53 @@ mod tests {
                 "key_to_flow {key_to_flow}: gradients differ by {off} (largest {scale})"
             );
         }
+    }
+
+    #[test]
+    fn a_replayed_rollout_leaves_out_a_sequence_that_breaks_not_the_run() {
+        let c = NetConfig {
+            key_to_flow: true,
+            ..NetConfig::tiny()
+        };
+        let mut t = init_net(&c, 9);
+        t.perturb(10, 0.03);
+        let device = crate::device::training_device();
+        let net = Net::load(&t, &c, &device).unwrap();
+        let (b, at, horizon) = (3, c.window - 1, 12);
+        let s = at + horizon + 1;
+        let mut r = Rng::new(13);
+        let mut tokens: Vec<f32> = (0..b * s * TOKEN_DIM).map(|_| 0.5 * r.normal()).collect();
+        for (i, tok) in tokens.chunks_exact_mut(TOKEN_DIM).enumerate() {
+            tok[FLAG_AT] = f32::from(u8::from(i % s >= at));
+            // The middle sequence's key flag is far beyond any trained value: the flow's
+            // inverse, reading it directly, overflows.
+            if i / s == 1 && i % s >= at {
+                tok[FLAG_AT] = 1e30;
+            }
+        }
+        let tt = Tensor::<3>::from_data(TensorData::new(tokens, [b, s, TOKEN_DIM]), &device);
+        let run = FreeRun {
+            at,
+            horizon,
+            temperature: 0.5,
+            backprop_steps: Some(1),
+            approach: 4,
+            bounded: false,
+        };
+        assert!(
+            net.stepped_key_rollout(tt.clone(), None, &run, &mut Rng::new(3))
+                .is_none(),
+            "the broken sequence no longer breaks the stepped run: the test proves nothing"
+        );
+        let outcome = net
+            .replayed_key_rollout(tt, &run, &mut Rng::new(3))
+            .unwrap();
+        assert_eq!(outcome.kept, [true, false, true]);
+        let scored = values(outcome.kept_mean(outcome.key_distance.clone()))[0];
+        assert!(scored.is_finite() && scored > 0.0, "{scored}");
+        let g = gradient(&net, outcome.kept_mean(outcome.key_distance.clone()));
+        assert!(g.iter().all(|v| v.is_finite()), "a gradient is not finite");
+        assert!(g.iter().any(|v| *v != 0.0), "no gradient at all");
     }
 
     #[test]
