@@ -81,7 +81,7 @@ fn damaged_model_file_is_named_in_the_error() {
 fn shipped_model_dances_the_demo_song_with_hardly_a_held_frame() {
     // A held frame (a sample the flow blew up, replaced by the last good pose) is a safety
     // net acting: rare, counted, never a freeze. Over 12 seeds at T = 0.5 and 1 (18 000
-    // frames) the previous model held 8, the current 1; more than 1 in 1 000 is a regression.
+    // frames) D held 8, K2 1, K2R (shipped now) 8; more than 1 in 1 000 is a regression.
     let skeleton = Skeleton::default_adult();
     let mut held = 0;
     let mut frames = 0;
