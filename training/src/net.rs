@@ -362,8 +362,7 @@ impl Net {
             // would put NaN in the weights. One that merely strayed is clamped as the live
             // range clamp would.
             let pose = leave_out_exploded(pose, &mut kept)?.clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND);
-            // 1 on the key frame; with no approach, 0 or less before it.
-            let weight = 1.0 - (last - t) as f32 / approach.max(1) as f32;
+            let weight = approach_weight(last - t, approach);
             if weight > 0.0 {
                 let d = key_distance(pose.clone(), key.clone()).mul_scalar(weight);
                 scored = Some(match scored {
@@ -508,9 +507,8 @@ impl Net {
         let poses = leave_out_exploded(poses, &mut kept)?
             .clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND)
             .reshape([b, steps, P]);
-        // 1 on the key frame; with no approach, 0 or less before it.
         let step_weights: Vec<f32> = (at..=last)
-            .map(|t| 1.0 - (last - t) as f32 / approach.max(1) as f32)
+            .map(|t| approach_weight(last - t, approach))
             .collect();
         let total: f32 = step_weights.iter().filter(|w| **w > 0.0).sum();
         if total <= 0.0 {
@@ -590,6 +588,12 @@ impl Net {
             key_to_flow: self.key_to_flow,
         }
     }
+}
+
+/// The weight of a rollout step's key distance `to_go` frames before the key: 1 on the key
+/// frame, falling by 1 / `approach` a frame before it; with no approach, 0 or less before it.
+fn approach_weight(to_go: usize, approach: usize) -> f32 {
+    1.0 - to_go as f32 / approach.max(1) as f32
 }
 
 /// Per sequence `[b]`, the distance between the rotations of `pose` `[b, P]` and `key`
