@@ -283,7 +283,8 @@ impl Net {
     /// None if the flow has become numerically singular, a pose is not finite or every
     /// sequence exploded. A fully detached run (`backprop_steps` Some(1), unbounded, no
     /// styles) is replayed ([`Net::replayed_key_rollout`]): the same outcome for the cost of
-    /// one forward pass instead of one a step.
+    /// one forward pass instead of one a step, except that a sequence whose pose is not finite
+    /// is left out instead of the whole run.
     pub fn key_rollout(
         &self,
         tokens: Tensor<3>,
@@ -406,7 +407,8 @@ impl Net {
     /// step-by-step run re-encoded — and the flow's inverse of each step's noise there gives
     /// the poses again, now with their gradient. Stepping through burn instead re-encoded the
     /// whole sequence with its gradient at every one of up to 51 steps: most of a rollout
-    /// step's time.
+    /// step's time. A sequence whose free run is not finite is left out as an exploded one
+    /// is; None only if every sequence is, or the flow is singular.
     pub fn replayed_key_rollout(
         &self,
         tokens: Tensor<3>,
