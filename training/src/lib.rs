@@ -5,6 +5,7 @@
 //! nothing here is linked into `danced`, so the live binary carries no ML framework.
 
 pub mod beat_training;
+pub mod body_shape;
 pub mod command;
 pub mod device;
 pub mod downbeat_training;

@@ -19,7 +19,7 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Train the neural dancer on the tang2018 dances.
-    Dancer(dancer::TrainArgs),
+    Dancer(Box<dancer::TrainArgs>),
     /// Train the learned beat activation on songs with exact beats (e.g. rendered ones).
     Beats(beats::TrainBeatsArgs),
     /// Train the downbeat network on songs whose beats carry their position in the bar.

@@ -4,6 +4,7 @@
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
+use crate::body_shape::BodyShape;
 use crate::flow::Flow;
 use crate::layers::Dense;
 use crate::transformer::Transformer;
@@ -137,6 +138,36 @@ impl FreeRunOutcome {
         shape[0] = dims[0];
         let w = Tensor::<D>::from_data(burn::tensor::TensorData::new(weights, shape), &device);
         (per_sequence * w).sum()
+    }
+
+    /// Per sequence `[b]`, the approach-weighted distance (as [`FreeRunOutcome::key_distance`]
+    /// weighs it, `approach` frames) of the poses reached from the key, measured as `shape`
+    /// says: the body shape's mean joint distance, cm. None if no step is scored.
+    pub fn key_distance_cm(&self, shape: &BodyShape, approach: usize) -> Option<Tensor<1>> {
+        let [b, steps, p] = self.poses.dims();
+        let w = self.tokens.dims()[1];
+        let key = self
+            .tokens
+            .clone()
+            .narrow(1, w - steps, 1)
+            .reshape([b, TOKEN_DIM])
+            .narrow(1, KEY_AT, KEY_ROT_DIM);
+        let weights = approach_weights(steps, approach)?;
+        let device = key.device();
+        let distances = shape
+            .distance_cm(
+                self.poses
+                    .clone()
+                    .reshape([b * steps, p])
+                    .narrow(1, ROTATIONS, KEY_ROT_DIM),
+                key.unsqueeze_dim::<3>(1)
+                    .repeat_dim(1, steps)
+                    .reshape([b * steps, KEY_ROT_DIM]),
+            )
+            .reshape([b, steps]);
+        let weights =
+            Tensor::<2>::from_data(burn::tensor::TensorData::new(weights, [1, steps]), &device);
+        Some((distances * weights).sum_dim(1).reshape([b]))
     }
 }
 
@@ -509,13 +540,7 @@ impl Net {
         let poses = leave_out_exploded(poses, &mut kept)?
             .clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND)
             .reshape([b, steps, P]);
-        let step_weights: Vec<f32> = (at..=last)
-            .map(|t| approach_weight(last - t, approach))
-            .collect();
-        let total: f32 = step_weights.iter().filter(|w| **w > 0.0).sum();
-        if total <= 0.0 {
-            return None;
-        }
+        let w = approach_weights(steps, approach)?;
         let distances = key_distance(
             poses.clone().reshape([b * steps, P]),
             key.unsqueeze_dim::<3>(1)
@@ -523,7 +548,6 @@ impl Net {
                 .reshape([b * steps, KEY_ROT_DIM]),
         )
         .reshape([b, steps]);
-        let w: Vec<f32> = step_weights.iter().map(|w| w.max(0.0) / total).collect();
         let w = Tensor::<2>::from_data(burn::tensor::TensorData::new(w, [1, steps]), &device);
         Some(FreeRunOutcome {
             key_distance: (distances * w).sum_dim(1).reshape([b]),
@@ -596,6 +620,16 @@ impl Net {
 /// frame, falling by 1 / `approach` a frame before it; with no approach, 0 or less before it.
 fn approach_weight(to_go: usize, approach: usize) -> f32 {
     1.0 - to_go as f32 / approach.max(1) as f32
+}
+
+/// The weights of a rollout's `steps` distances (the last on the key frame), each
+/// [`approach_weight`] floored at 0, summing to 1; None if none is positive.
+fn approach_weights(steps: usize, approach: usize) -> Option<Vec<f32>> {
+    let raw: Vec<f32> = (0..steps)
+        .map(|g| approach_weight(steps - 1 - g, approach).max(0.0))
+        .collect();
+    let total: f32 = raw.iter().sum();
+    (total > 0.0).then(|| raw.iter().map(|w| w / total).collect())
 }
 
 /// Per sequence `[b]`, the distance between the rotations of `pose` `[b, P]` and `key`

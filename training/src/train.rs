@@ -6,6 +6,7 @@ use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 
+use crate::body_shape::BodyShape;
 use crate::device::{cpu_device, training_device};
 use crate::layers::values;
 use crate::net::{AUX_HORIZONS, FreeRun, FreeRunOutcome, Net};
@@ -675,6 +676,10 @@ pub struct KeyRollout {
     pub critic: Option<CriticTerm>,
     /// Seed of the rollout's sampling noise.
     pub noise_seed: u64,
+    /// Score the key distance as the body shape's mean joint distance, this many cm to one
+    /// unit of `weight` (what `danced eval` scores: a wrist's own turn moves no joint, a
+    /// hip's moves all); None: the normalised rotations' distance.
+    pub key_cm: Option<f32>,
 }
 
 /// The frozen critic's term of a [`KeyRollout`]: its key-hidden NLL of the free run's poses.
@@ -747,6 +752,8 @@ pub struct Trainer {
     /// A frozen copy of the starting weights that scores the key-pose rollouts' poses with
     /// the key hidden ([`KeyRollout::critic`]).
     critic: Option<Net>,
+    /// The body shape of the model's normalised rotations, built on the first rollout.
+    shape: Option<BodyShape>,
 }
 
 /// What one [`Trainer::step`] scored.
@@ -757,6 +764,9 @@ pub struct StepLoss {
     /// The rollout's key-pose distance (normalised), None without a rollout or when it
     /// exploded or broke and was not scored.
     pub key_error: Option<f32>,
+    /// The same distance as the body shape's mean joint distance, cm (what `danced eval`
+    /// scores), whichever of the two the loss used.
+    pub key_error_cm: Option<f32>,
     /// The critic's key-hidden NLL of the rollout's poses (nats per frame), None without a
     /// critic or a scored rollout.
     pub keyless_nll: Option<f32>,
@@ -780,6 +790,7 @@ impl Trainer {
             device,
             model,
             critic: None,
+            shape: None,
         })
     }
 
@@ -815,6 +826,7 @@ impl Trainer {
         let mut scored = StepLoss {
             nll: f32::NAN,
             key_error: None,
+            key_error_cm: None,
             keyless_nll: None,
             exploded_sequences: 0,
             gradient_not_finite: false,
@@ -839,14 +851,35 @@ impl Trainer {
             });
             let mut rng = Rng::new(r.noise_seed);
             let reached = net.key_rollout(rt.tokens, styles.clone(), &r.run, &mut rng);
+            if self.shape.is_none() {
+                self.shape = self
+                    .model
+                    .normalizer()
+                    .ok()
+                    .map(|n| BodyShape::new(&n, &self.device));
+            }
             if let Some(outcome) = reached {
-                let error = outcome.kept_mean(outcome.key_distance.clone());
                 // A free run that broke (non-finite) teaches nothing; the NLL still counts.
-                scored.key_error = values(error.clone())
-                    .first()
-                    .copied()
-                    .filter(|e| e.is_finite());
-                if scored.key_error.is_some() {
+                let finite =
+                    |t: &Tensor<1>| values(t.clone()).first().copied().filter(|e| e.is_finite());
+                let normalised = outcome.kept_mean(outcome.key_distance.clone());
+                let cm = self
+                    .shape
+                    .as_ref()
+                    .and_then(|shape| outcome.key_distance_cm(shape, r.run.approach))
+                    .map(|d| outcome.kept_mean(d));
+                scored.key_error = finite(&normalised);
+                scored.key_error_cm = cm.as_ref().and_then(finite);
+                let error = match r.key_cm {
+                    Some(unit) => cm
+                        .filter(|_| scored.key_error_cm.is_some())
+                        .map(|d| d.div_scalar(unit)),
+                    None => Some(normalised),
+                };
+                if error.is_none() {
+                    scored.key_error = None;
+                }
+                if let (Some(error), Some(_)) = (error, scored.key_error) {
                     scored.exploded_sequences = outcome.exploded();
                     loss = loss + error.mul_scalar(r.weight);
                     if let (Some(critic), Some(term)) = (&self.critic, r.critic) {
@@ -1073,11 +1106,12 @@ mod tests {
         assert!(all < 0.05, "own keys at 1: {all}");
     }
 
-    #[test]
-    fn key_rollout_steps_pull_the_free_run_onto_the_key() {
+    /// 100 rollout steps on the same sequences, the key distance scored as `key_cm` says:
+    /// the free run's distance from the key before and after, (normalised, cm).
+    fn key_lesson(key_cm: Option<f32>) -> ((f32, f32), (f32, f32)) {
         let (c, corpus, mut tr, _) = periodic_trainer(None);
         let at = c.window - 1;
-        let rollout = |lr: f64, tr: &mut Trainer| {
+        let mut rollout = |lr: f64| {
             // The same sequences every time, free-run at T = 0: a deterministic error.
             let r = KeyRollout {
                 batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0),
@@ -1092,19 +1126,42 @@ mod tests {
                 weight: 1.0,
                 critic: None,
                 noise_seed: 9,
+                key_cm,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
             let scored = tr.step(&b, Some(&r), lr, false);
             assert!(scored.nll.is_finite());
-            scored.key_error.unwrap()
+            (scored.key_error.unwrap(), scored.key_error_cm.unwrap())
         };
-        let before = rollout(0.0, &mut tr);
-        assert!(before > 1.0, "{before}");
+        let before = rollout(0.0);
         for _ in 0..100 {
-            rollout(3e-3, &mut tr);
+            rollout(3e-3);
         }
-        let after = rollout(0.0, &mut tr);
-        assert!(after < 0.5 * before, "key error {before} → {after}");
+        (before, rollout(0.0))
+    }
+
+    #[test]
+    fn key_rollout_steps_pull_the_free_run_onto_the_key() {
+        let (before, after) = key_lesson(None);
+        assert!(before.0 > 1.0, "{before:?}");
+        assert!(after.0 < 0.5 * before.0, "key error {before:?} → {after:?}");
+    }
+
+    #[test]
+    fn scored_by_body_shape_the_rollout_closes_more_of_the_distance_in_cm() {
+        let (_, by_rotations) = key_lesson(None);
+        let (before, after) = key_lesson(Some(3.0));
+        assert!(before.1 > 3.0, "{before:?}");
+        // The normalised distance closes features no joint moves with (here 11.3 → 1.6
+        // normalised, 40 → 32 cm); the body shape's closes the joints (40 → 23 cm).
+        assert!(
+            after.1 < 0.65 * before.1,
+            "key error {before:?} → {after:?}"
+        );
+        assert!(
+            after.1 < 0.8 * by_rotations.1,
+            "{after:?} cm by body shape, {by_rotations:?} by rotations"
+        );
     }
 
     /// The critic's full term: every frame, no floor, no fade (to measure with at learning
@@ -1132,6 +1189,7 @@ mod tests {
             weight,
             critic,
             noise_seed: 9,
+            key_cm: None,
         };
         let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
         tr.step(&b, Some(&r), lr, false)

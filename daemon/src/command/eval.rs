@@ -39,6 +39,10 @@ pub struct EvalArgs {
     /// the training dances: a checkpoint picked by this never saw the validation dances.
     #[arg(long, conflicts_with_all = ["quick", "ground_truth", "music"])]
     pub training_songs: bool,
+    /// Only the key-pose tables (the error at the key frame by horizon, the transitions) of
+    /// the neural rows: the shipped setting, without the final blend, and the network alone.
+    #[arg(long, conflicts_with_all = ["quick", "ground_truth", "music", "training_songs"])]
+    pub keys: bool,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -143,6 +147,18 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         set.validation_names().join(" "),
         started.elapsed().as_secs_f64()
     );
+    if o.keys {
+        let model = crate::dancer::load_model(o.model.as_deref())?;
+        let mut sources = sources(o, &model)?;
+        sources.retain(|(n, _)| n == "neural" || n == NETWORK_ONLY);
+        let mut key_sources: Vec<(String, &mut dyn MotionSource)> = sources
+            .iter_mut()
+            .map(|(n, d)| (n.clone(), d.as_mut() as &mut dyn MotionSource))
+            .collect();
+        key_tables(o, &set, &model, &mut key_sources)?;
+        eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+        return Ok(());
+    }
     let gt = set.ground_truth();
     let mut rows = vec![set.score("ground truth", &gt)?];
     // What `danced-train dancer --beat-retime` makes of the data: the cost of the retime in
@@ -202,68 +218,12 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
         return Ok(());
     }
-    // Key poses: mean joint error at the target frame against the transition length.
-    let bank: Vec<_> = crate::pose_bank::PoseBank::shipped()?
-        .poses()
-        .iter()
-        .map(|p| p.rotations)
-        .collect();
-    let mut key_table =
-        String::from("\n| system (key-pose error at the target frame, cm), announced");
-    for h in KEY_HORIZONS_S {
-        key_table += &format!(" | {h} s ahead");
-    }
-    key_table += " | cues |\n| --- |";
-    key_table += &" --- |".repeat(KEY_HORIZONS_S.len() + 1);
-    key_table += "\n";
-    let mut unaided = crate::dancer::neural_dancer(&model, o.seed)?;
-    unaided.set_key_blend_frames(0);
     let mut key_sources: Vec<(String, &mut dyn MotionSource)> = sources
         .iter_mut()
         .filter(|(n, _)| !n.contains("full") && !ablation(n))
         .map(|(n, d)| (n.clone(), d.as_mut() as &mut dyn MotionSource))
         .collect();
-    key_sources.push(("neural without the final blend".into(), &mut unaided));
-    for (name, dancer) in key_sources {
-        for t in [0.0f32, 0.5] {
-            key_table += &format!("| {name} T={t} |");
-            let mut cues = 0;
-            for h in KEY_HORIZONS_S {
-                let (e, n) = set.key_pose_error(&mut *dancer, t, o.seed, &bank, h);
-                key_table += &format!(" {e:.2} |");
-                cues = n;
-            }
-            key_table += &format!(" {cues} |\n");
-        }
-    }
-    print!("{key_table}");
-    // Transitions: the 2 s leading into a key pose and the 2 s after it against the same
-    // windows danced with no key pose.
-    println!(
-        "\n| system | FID_k of the {s} s before key poses ↓ | of the {s} s after them ↓ | of the same windows danced free ↓ | before / free (target ≤ 1.25) | after / free | windows |\n| --- | --- | --- | --- | --- | --- | --- |",
-        s = crate::eval::TRANSITION_S
-    );
-    let mut led = crate::dancer::neural_dancer(&model, o.seed)?;
-    led.set_key_pose_route(model::neural::dancer::KeyPoseRoute::Network);
-    let mut transition_sources: Vec<(String, &mut dyn MotionSource)> = sources
-        .iter_mut()
-        .filter(|(n, _)| !n.contains("full") && !ablation(n))
-        .map(|(n, d)| (n.clone(), d.as_mut() as &mut dyn MotionSource))
-        .collect();
-    transition_sources.push(("neural, key to the network".into(), &mut led));
-    for (name, dancer) in transition_sources {
-        let t = 0.5;
-        let f = set.transition_fid(dancer, t, o.seed, &bank)?;
-        println!(
-            "| {name} T={t} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {} |",
-            f.before_key,
-            f.after_key,
-            f.free,
-            f.before_key / f.free,
-            f.after_key / f.free,
-            f.windows
-        );
-    }
+    key_tables(o, &set, &model, &mut key_sources)?;
     // Long runs: no freeze over five minutes on any song.
     println!(
         "\n| system | freezes in {:.0} min on each validation song (looped) | songs with a freeze |\n| --- | --- | --- |",
@@ -285,6 +245,81 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     }
     music_table(o, &mut sources, &temperatures)?;
     eprintln!("eval took {:.1} s", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// The key-pose tables of `sources` and of the neural dancer on `model` without the final
+/// blend and with the key handed to the network: the mean joint error at the key frame by
+/// horizon, and the 2 s before and after key poses against the same windows danced free.
+fn key_tables(
+    o: &EvalArgs,
+    set: &crate::eval::EvalSet,
+    model: &model::neural::file::NeuralModel,
+    sources: &mut [(String, &mut dyn MotionSource)],
+) -> Result<()> {
+    let bank: Vec<_> = crate::pose_bank::PoseBank::shipped()?
+        .poses()
+        .iter()
+        .map(|p| p.rotations)
+        .collect();
+    let mut key_table =
+        String::from("\n| system (key-pose error at the target frame, cm), announced");
+    for h in KEY_HORIZONS_S {
+        key_table += &format!(" | {h} s ahead");
+    }
+    key_table += " | cues |\n| --- |";
+    key_table += &" --- |".repeat(KEY_HORIZONS_S.len() + 1);
+    key_table += "\n";
+    let mut unaided = crate::dancer::neural_dancer(model, o.seed)?;
+    unaided.set_key_blend_frames(0);
+    let unaided_name = "neural without the final blend".to_string();
+    for (name, dancer) in sources
+        .iter_mut()
+        .map(|(n, d)| (&*n, &mut **d))
+        .chain(std::iter::once((
+            &unaided_name,
+            &mut unaided as &mut dyn MotionSource,
+        )))
+    {
+        for t in [0.0f32, 0.5] {
+            key_table += &format!("| {name} T={t} |");
+            let mut cues = 0;
+            for h in KEY_HORIZONS_S {
+                let (e, n) = set.key_pose_error(&mut *dancer, t, o.seed, &bank, h);
+                key_table += &format!(" {e:.2} |");
+                cues = n;
+            }
+            key_table += &format!(" {cues} |\n");
+        }
+    }
+    print!("{key_table}");
+    println!(
+        "\n| system | FID_k of the {s} s before key poses ↓ | of the {s} s after them ↓ | of the same windows danced free ↓ | before / free (target ≤ 1.25) | after / free | windows |\n| --- | --- | --- | --- | --- | --- | --- |",
+        s = crate::eval::TRANSITION_S
+    );
+    let mut led = crate::dancer::neural_dancer(model, o.seed)?;
+    led.set_key_pose_route(model::neural::dancer::KeyPoseRoute::Network);
+    let led_name = "neural, key to the network".to_string();
+    for (name, dancer) in sources
+        .iter_mut()
+        .map(|(n, d)| (&*n, &mut **d))
+        .chain(std::iter::once((
+            &led_name,
+            &mut led as &mut dyn MotionSource,
+        )))
+    {
+        let t = 0.5;
+        let f = set.transition_fid(dancer, t, o.seed, &bank)?;
+        println!(
+            "| {name} T={t} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {} |",
+            f.before_key,
+            f.after_key,
+            f.free,
+            f.before_key / f.free,
+            f.after_key / f.free,
+            f.windows
+        );
+    }
     Ok(())
 }
 

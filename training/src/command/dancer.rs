@@ -132,6 +132,12 @@ pub struct TrainArgs {
     /// without it, more than a draw usually moves it.
     #[arg(long, requires = "key_rollout")]
     pub rollout_bounded: bool,
+    /// Score the key-pose rollouts' distance as the body shape's mean joint distance (joint
+    /// positions relative to the hips on the default rig, what `danced eval` scores), this
+    /// many cm to one unit of `--key-rollout`; default: the distance in normalised rotations,
+    /// which weighs a wrist's own turn (it moves no joint) as much as the hips' (they move all).
+    #[arg(long, value_name = "CM", requires = "key_rollout", value_parser = positive_cm)]
+    pub rollout_key_cm: Option<f64>,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -220,6 +226,13 @@ fn parse_decay(s: &str) -> Result<f64, String> {
 /// Where the last step's weights go beside an averaged model: `X.dnn` → `X.last.dnn`.
 pub fn last_step_path(out: &Path) -> PathBuf {
     out.with_extension("last.dnn")
+}
+
+fn positive_cm(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{s:?}: centimetres to a unit is a number above 0")),
+    }
 }
 
 fn parse_depth(s: &str) -> Result<f64, String> {
@@ -591,6 +604,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 }
             ) + &option_if_set("--rollout-foreign", args.rollout_foreign)
                 + &option_if_set("--rollout-approach", args.rollout_approach as f64)
+                + &args
+                    .rollout_key_cm
+                    .map_or(String::new(), |c| format!(" --rollout-key-cm {c}"))
                 + &option_if_set("--rollout-keyless", args.rollout_keyless)
                 + &args
                     .rollout_keyless_floor
@@ -645,6 +661,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let mut step: u64 = 0;
     let mut smoothed = f64::NAN;
     let mut key_error = f64::NAN;
+    let mut key_error_cm = f64::NAN;
     let mut keyless_nll = f64::NAN;
     let mut skipped_rollouts = 0u64;
     let mut exploded_sequences = 0u64;
@@ -739,6 +756,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     fade: args.rollout_keyless_fade,
                 }),
                 noise_seed: rng.next_u64(),
+                key_cm: args.rollout_key_cm.map(|c| c as f32),
             }
         });
         let scored = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux);
@@ -753,6 +771,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         gradient_skips += u64::from(scored.gradient_not_finite);
         if let Some(e) = scored.key_error {
             key_error = running_mean(key_error, f64::from(e));
+        }
+        if let Some(e) = scored.key_error_cm {
+            key_error_cm = running_mean(key_error_cm, f64::from(e));
         }
         if let Some(e) = scored.keyless_nll {
             keyless_nll = running_mean(keyless_nll, f64::from(e));
@@ -787,7 +808,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     )
                 } else {
                     format!(
-                        ", key-pose rollout error {key_error:.2} ({skipped_rollouts} rollouts broke or all exploded, not scored; {exploded_sequences} exploded sequences left out of the others)"
+                        ", key-pose rollout error {key_error:.2} ({key_error_cm:.1} cm; {skipped_rollouts} rollouts broke or all exploded, not scored; {exploded_sequences} exploded sequences left out of the others)"
                     )
                 },
                 if keyless_nll.is_nan() {

@@ -1,0 +1,228 @@
+//! The body shape of poses given as the network's normalised rotation features, with its
+//! gradient: joint positions relative to the hips, heading removed, on the default rig — what
+//! `danced eval` scores a key pose by (`daemon::key_cue::key_pose_error_cm`). A distance in
+//! normalised rotations weighs every feature alike, so the wrists', the head's and the toes'
+//! own rotations (which move no joint) count as much as the hips' (which move all of them).
+
+use burn::tensor::{Device, Tensor, TensorData};
+use glam::Vec3;
+
+use model::motion::{ROTATION_DIM, ROTATIONS};
+use model::neural::token::{KEY_ROT_DIM, Normalizer};
+use model::rig::{JOINT_COUNT, Joint, Skeleton};
+
+/// Forward kinematics of normalised rotation features onto the default adult rig.
+#[derive(Clone, Debug)]
+pub struct BodyShape {
+    /// Means of the rotation features, `[1, KEY_ROT_DIM]`.
+    mean: Tensor<2>,
+    /// Standard deviations of the rotation features, `[1, KEY_ROT_DIM]`.
+    std: Tensor<2>,
+    /// Each joint's offset from its parent, metres.
+    offsets: [Vec3; JOINT_COUNT],
+}
+
+impl BodyShape {
+    /// The body shape of features normalised by `norm`'s pose statistics (which the key pose
+    /// shares), on the default adult rig.
+    pub fn new(norm: &Normalizer, device: &Device) -> Self {
+        let row = |v: &[f32]| {
+            Tensor::from_data(
+                TensorData::new(
+                    v[ROTATIONS..ROTATIONS + KEY_ROT_DIM].to_vec(),
+                    [1, KEY_ROT_DIM],
+                ),
+                device,
+            )
+        };
+        BodyShape {
+            mean: row(&norm.pose_mean),
+            std: row(&norm.pose_std),
+            offsets: Skeleton::default_adult().offsets,
+        }
+    }
+
+    /// Joint positions relative to the hips, metres, `[n, JOINT_COUNT, 3]`, of `rotations`
+    /// `[n, KEY_ROT_DIM]` (normalised 6D features, the hips' heading already removed).
+    pub fn positions(&self, rotations: Tensor<2>) -> Tensor<3> {
+        let [n, _] = rotations.dims();
+        let device = rotations.device();
+        let raw = (rotations * self.std.clone() + self.mean.clone()).reshape([
+            n,
+            JOINT_COUNT,
+            ROTATION_DIM,
+        ]);
+        let mut world: Vec<Tensor<3>> = Vec::with_capacity(JOINT_COUNT);
+        let mut at: Vec<Tensor<2>> = Vec::with_capacity(JOINT_COUNT);
+        for joint in Joint::ALL {
+            let i = joint.index();
+            let local = matrix_of_6d(raw.clone().narrow(1, i, 1).reshape([n, ROTATION_DIM]));
+            match joint.parent() {
+                Some(p) => {
+                    let p = p.index();
+                    let o = self.offsets[i];
+                    let column = |c: usize| world[p].clone().narrow(2, c, 1).reshape([n, 3]);
+                    let moved = column(0).mul_scalar(o.x)
+                        + column(1).mul_scalar(o.y)
+                        + column(2).mul_scalar(o.z);
+                    at.push(at[p].clone() + moved);
+                    world.push(world[p].clone().matmul(local));
+                }
+                None => {
+                    at.push(Tensor::zeros([n, 3], &device));
+                    world.push(local);
+                }
+            }
+        }
+        Tensor::stack(at, 1)
+    }
+
+    /// Per row `[n]`, the mean distance over the joints, cm, between the body shapes of `a`
+    /// and `b` (both `[n, KEY_ROT_DIM]`, normalised).
+    pub fn distance_cm(&self, a: Tensor<2>, b: Tensor<2>) -> Tensor<1> {
+        let [n, _] = a.dims();
+        // Not squared: as with the normalised distance, its gradient keeps a unit scale
+        // however far the free run strayed; the epsilon keeps it finite on the key itself.
+        (self.positions(a) - self.positions(b))
+            .powi_scalar(2)
+            .sum_dim(2)
+            .add_scalar(1e-8)
+            .sqrt()
+            .reshape([n, JOINT_COUNT])
+            .mean_dim(1)
+            .reshape([n])
+            .mul_scalar(100.0)
+    }
+}
+
+/// Rotation matrices `[n, 3, 3]` (columns the images of +X, +Y, +Z) of 6D features `[n, 6]`
+/// (the first two columns, Gram–Schmidt-orthonormalised as Zhou et al. read them back).
+fn matrix_of_6d(six: Tensor<2>) -> Tensor<3> {
+    let [n, _] = six.dims();
+    let unit = |v: Tensor<2>| {
+        let norm = v.clone().powi_scalar(2).sum_dim(1).add_scalar(1e-12).sqrt();
+        v / norm
+    };
+    let x = unit(six.clone().narrow(1, 0, 3));
+    let y = six.narrow(1, 3, 3);
+    let along = (x.clone() * y.clone()).sum_dim(1);
+    let y = unit(y - x.clone() * along);
+    let z = cross(x.clone(), y.clone());
+    Tensor::stack::<3>(vec![x, y, z], 2).reshape([n, 3, 3])
+}
+
+/// Row-wise cross product of `[n, 3]` vectors.
+fn cross(a: Tensor<2>, b: Tensor<2>) -> Tensor<2> {
+    let c = |v: &Tensor<2>, i: usize| v.clone().narrow(1, i, 1);
+    Tensor::cat(
+        vec![
+            c(&a, 1) * c(&b, 2) - c(&a, 2) * c(&b, 1),
+            c(&a, 2) * c(&b, 0) - c(&a, 0) * c(&b, 2),
+            c(&a, 0) * c(&b, 1) - c(&a, 1) * c(&b, 0),
+        ],
+        1,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::device::cpu_device;
+    use crate::layers::values;
+    use glam::Quat;
+    use model::motion::MOTION_FEATURE_DIM;
+    use model::motion::{heading, yaw};
+    use model::neural::rng::Rng;
+    use model::neural::token::key_rotations;
+    use model::rig::Pose;
+
+    fn random_rotations(rng: &mut Rng) -> [Quat; JOINT_COUNT] {
+        std::array::from_fn(|_| {
+            Quat::from_xyzw(rng.normal(), rng.normal(), rng.normal(), rng.normal()).normalize()
+        })
+    }
+
+    /// What `danced eval` scores: the rig's own forward kinematics, the hips' heading removed.
+    fn shape_by_the_rig(rotations: &[Quat; JOINT_COUNT]) -> [Vec3; JOINT_COUNT] {
+        let mut pose = Pose::rest();
+        pose.local_rotations = *rotations;
+        let h = heading(pose.local_rotations[0]);
+        pose.local_rotations[0] = (yaw(-h) * pose.local_rotations[0]).normalize();
+        pose.root_position = Vec3::ZERO;
+        let mut w = [Vec3::ZERO; JOINT_COUNT];
+        Skeleton::default_adult().world_positions(&pose, &mut w);
+        w.map(|p| p - w[0])
+    }
+
+    fn normalizer(rng: &mut Rng) -> Normalizer {
+        let mut n = Normalizer::identity();
+        for i in 0..MOTION_FEATURE_DIM {
+            n.pose_mean[i] = 0.3 * rng.normal();
+            n.pose_std[i] = 0.2 + rng.normal().abs();
+        }
+        n
+    }
+
+    fn features(norm: &Normalizer, rotations: &[Quat; JOINT_COUNT]) -> Vec<f32> {
+        let mut raw = [0.0; KEY_ROT_DIM];
+        key_rotations(rotations, &mut raw);
+        let mut out = vec![0.0; KEY_ROT_DIM];
+        norm.key(&raw, &mut out);
+        out
+    }
+
+    #[test]
+    fn the_body_shape_distance_is_the_rigs_mean_joint_distance_in_cm() {
+        let device = cpu_device();
+        let mut rng = Rng::new(7);
+        let norm = normalizer(&mut rng);
+        let shape = BodyShape::new(&norm, &device);
+        let (mut a, mut b, mut expected) = (Vec::new(), Vec::new(), Vec::new());
+        for _ in 0..5 {
+            let (qa, qb) = (random_rotations(&mut rng), random_rotations(&mut rng));
+            a.extend(features(&norm, &qa));
+            b.extend(features(&norm, &qb));
+            let (sa, sb) = (shape_by_the_rig(&qa), shape_by_the_rig(&qb));
+            let mean: f32 =
+                sa.iter().zip(&sb).map(|(x, y)| x.distance(*y)).sum::<f32>() / JOINT_COUNT as f32;
+            expected.push(100.0 * mean);
+        }
+        let rows = |v: Vec<f32>| Tensor::from_data(TensorData::new(v, [5, KEY_ROT_DIM]), &device);
+        let got = values(shape.distance_cm(rows(a.clone()), rows(b)));
+        for (g, e) in got.iter().zip(&expected) {
+            assert!(e > &5.0, "random poses {e} cm apart");
+            assert!(
+                (g - e).abs() < 1e-3 * e.max(1.0),
+                "{got:?} against {expected:?}"
+            );
+        }
+        // A pose is no distance from itself (the epsilon aside).
+        let same = values(shape.distance_cm(rows(a.clone()), rows(a)));
+        assert!(same.iter().all(|d| *d < 0.02), "{same:?}");
+    }
+
+    #[test]
+    fn the_leaves_own_rotations_move_no_joint() {
+        let device = cpu_device();
+        let mut rng = Rng::new(3);
+        let norm = normalizer(&mut rng);
+        let shape = BodyShape::new(&norm, &device);
+        let q = random_rotations(&mut rng);
+        let mut turned = q;
+        for leaf in [Joint::Head, Joint::LeftHand, Joint::RightHand] {
+            turned[leaf.index()] = Quat::from_rotation_x(1.0) * q[leaf.index()];
+        }
+        let mut hips = q;
+        hips[0] = Quat::from_rotation_x(0.3) * q[0];
+        let row = |r: &[Quat; JOINT_COUNT]| {
+            Tensor::from_data(
+                TensorData::new(features(&norm, r), [1, KEY_ROT_DIM]),
+                &device,
+            )
+        };
+        let leaves = values(shape.distance_cm(row(&q), row(&turned)))[0];
+        let tilted = values(shape.distance_cm(row(&q), row(&hips)))[0];
+        assert!(leaves < 0.02, "{leaves} cm");
+        assert!(tilted > 5.0, "{tilted} cm");
+    }
+}
