@@ -522,7 +522,10 @@ impl Corpus {
     /// drawn as [`Corpus::random_batch`] draws them): each announces a key pose due `horizon`
     /// frames after token `at`, on tokens `at` to `at + horizon` (< the sequence length) — its
     /// own pose of that frame, or for a fraction `foreign` of them a pose from anywhere in the
-    /// training dances, as a performer calls a pose the dance was not heading for.
+    /// training dances, as a performer calls a pose the dance was not heading for: of
+    /// `foreign_draws` frames drawn, the one farthest (normalised rotations) from the dance's
+    /// own pose there, since a performer calls poses that stand out (the shipped bank is the
+    /// poses farthest apart) and a frame drawn at random is most often near the mean pose.
     pub fn rollout_batch(
         &self,
         rng: &mut Rng,
@@ -530,6 +533,7 @@ impl Corpus {
         at: usize,
         horizon: usize,
         foreign: f64,
+        foreign_draws: usize,
     ) -> Batch {
         let mut batch = Batch::default();
         let s = self.sequence;
@@ -540,8 +544,22 @@ impl Corpus {
             self.push_sequence(&mut batch, dance, start, key, None, None);
             // Drawn only when asked for, so runs without foreign keys keep their random stream.
             if foreign > 0.0 && rng.uniform() < foreign {
-                let (other, frame) = self.any_frame(rng);
-                let pose = rotations(&self.dances[other].motion, frame);
+                let own = rotations(&self.dances[dance].motion, start + at + horizon);
+                let apart = |(d, f): (usize, usize)| -> f32 {
+                    rotations(&self.dances[d].motion, f)
+                        .iter()
+                        .zip(own)
+                        .map(|(a, b)| (a - b) * (a - b))
+                        .sum()
+                };
+                let mut pick = self.any_frame(rng);
+                for _ in 1..foreign_draws {
+                    let other = self.any_frame(rng);
+                    if apart(other) > apart(pick) {
+                        pick = other;
+                    }
+                }
+                let pose = rotations(&self.dances[pick.0].motion, pick.1);
                 announce_on_last(&mut batch, s, at, horizon, pose);
             }
         }
@@ -1084,7 +1102,7 @@ mod tests {
             .collect();
         // Per sequence: is the announced key its own pose at the key frame?
         let own_keys = |foreign: f64| -> Vec<bool> {
-            let b = corpus.rollout_batch(&mut Rng::new(5), 400, at, horizon, foreign);
+            let b = corpus.rollout_batch(&mut Rng::new(5), 400, at, horizon, foreign, 1);
             (0..b.sequences)
                 .map(|i| {
                     let tok = |t: usize| &b.tokens[(i * s + t) * TOKEN_DIM..][..TOKEN_DIM];
@@ -1104,6 +1122,27 @@ mod tests {
         assert!((half - 0.5).abs() < 0.08, "own keys at 0.5: {half}");
         let all = share(own_keys(1.0));
         assert!(all < 0.05, "own keys at 1: {all}");
+        // The farthest of several draws stands further from the dance's own pose.
+        let apart = |draws: usize| -> f32 {
+            let b = corpus.rollout_batch(&mut Rng::new(5), 400, at, horizon, 1.0, draws);
+            (0..b.sequences)
+                .map(|i| {
+                    let key = &b.tokens[(i * s + at) * TOKEN_DIM + token::KEY_AT..][..KEY_ROT_DIM];
+                    let own = rotations(&b.targets[(i * s + at + horizon) * P..][..P], 0);
+                    key.iter()
+                        .zip(own)
+                        .map(|(a, b)| (a - b).powi(2))
+                        .sum::<f32>()
+                        .sqrt()
+                })
+                .sum::<f32>()
+                / b.sequences as f32
+        };
+        let (one, eight) = (apart(1), apart(8));
+        assert!(
+            eight > 1.3 * one,
+            "mean distance {one} with one draw, {eight} with eight"
+        );
     }
 
     /// 100 rollout steps on the same sequences, the key distance scored as `key_cm` says:
@@ -1114,7 +1153,7 @@ mod tests {
         let mut rollout = |lr: f64| {
             // The same sequences every time, free-run at T = 0: a deterministic error.
             let r = KeyRollout {
-                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0),
+                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0, 1),
                 run: FreeRun {
                     at,
                     horizon: 6,
@@ -1238,7 +1277,7 @@ mod tests {
         let at = c.window - 1;
         // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
         // off the dance, and only the critic's term can pull it back.
-        let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0);
+        let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0, 1);
         let run = FreeRun {
             at,
             horizon: 8,
@@ -1477,7 +1516,7 @@ mod tests {
         corpus.set_style_balance(1.0);
         assert!((cha_cha_share(&corpus) - 0.5).abs() < 0.04);
         // The key-pose rollouts' sequences are balanced alike.
-        let rollouts = corpus.rollout_batch(&mut Rng::new(9), 2000, 4, 4, 0.0);
+        let rollouts = corpus.rollout_batch(&mut Rng::new(9), 2000, 4, 4, 0.0, 1);
         let rows = rollouts.styles.chunks_exact(4).step_by(16);
         let share = rows.filter(|r| r[0] == 1.0).count() as f64 / 2000.0;
         assert!(

@@ -132,6 +132,11 @@ pub struct TrainArgs {
     /// without it, more than a draw usually moves it.
     #[arg(long, requires = "key_rollout")]
     pub rollout_bounded: bool,
+    /// Draw each foreign key pose (`--rollout-foreign`) as the farthest of N frames from the
+    /// dance's own pose at the key frame: performers call poses that stand out, and a frame
+    /// drawn at random is most often near the mean pose.
+    #[arg(long, value_name = "N", default_value_t = 1, requires = "rollout_foreign", value_parser = clap::value_parser!(u64).range(1..=64))]
+    pub rollout_foreign_draws: u64,
     /// Score the key-pose rollouts' distance as the body shape's mean joint distance (joint
     /// positions relative to the hips on the default rig, what `danced eval` scores), this
     /// many cm to one unit of `--key-rollout`; default: the distance in normalised rotations,
@@ -604,6 +609,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 }
             ) + &option_if_set("--rollout-foreign", args.rollout_foreign)
                 + &option_if_set("--rollout-approach", args.rollout_approach as f64)
+                + &if args.rollout_foreign_draws > 1 {
+                    format!(" --rollout-foreign-draws {}", args.rollout_foreign_draws)
+                } else {
+                    String::new()
+                }
                 + &args
                     .rollout_key_cm
                     .map_or(String::new(), |c| format!(" --rollout-key-cm {c}"))
@@ -737,6 +747,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                         at,
                         horizon,
                         args.rollout_foreign,
+                        args.rollout_foreign_draws as usize,
                     )
                 } else {
                     corpus.free_rollout_batch(&mut rng, args.rollout_sequences)
