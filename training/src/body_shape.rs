@@ -129,29 +129,16 @@ mod tests {
     use super::*;
     use crate::device::cpu_device;
     use crate::layers::values;
+    use daemon::key_cue::body_shape;
     use glam::Quat;
     use model::motion::MOTION_FEATURE_DIM;
-    use model::motion::{heading, yaw};
     use model::neural::rng::Rng;
     use model::neural::token::key_rotations;
-    use model::rig::Pose;
 
     fn random_rotations(rng: &mut Rng) -> [Quat; JOINT_COUNT] {
         std::array::from_fn(|_| {
             Quat::from_xyzw(rng.normal(), rng.normal(), rng.normal(), rng.normal()).normalize()
         })
-    }
-
-    /// What `danced eval` scores: the rig's own forward kinematics, the hips' heading removed.
-    fn shape_by_the_rig(rotations: &[Quat; JOINT_COUNT]) -> [Vec3; JOINT_COUNT] {
-        let mut pose = Pose::rest();
-        pose.local_rotations = *rotations;
-        let h = heading(pose.local_rotations[0]);
-        pose.local_rotations[0] = (yaw(-h) * pose.local_rotations[0]).normalize();
-        pose.root_position = Vec3::ZERO;
-        let mut w = [Vec3::ZERO; JOINT_COUNT];
-        Skeleton::default_adult().world_positions(&pose, &mut w);
-        w.map(|p| p - w[0])
     }
 
     fn normalizer(rng: &mut Rng) -> Normalizer {
@@ -182,7 +169,8 @@ mod tests {
             let (qa, qb) = (random_rotations(&mut rng), random_rotations(&mut rng));
             a.extend(features(&norm, &qa));
             b.extend(features(&norm, &qb));
-            let (sa, sb) = (shape_by_the_rig(&qa), shape_by_the_rig(&qb));
+            // What `danced eval` scores a key pose by.
+            let (sa, sb) = (body_shape(&qa), body_shape(&qb));
             let mean: f32 =
                 sa.iter().zip(&sb).map(|(x, y)| x.distance(*y)).sum::<f32>() / JOINT_COUNT as f32;
             expected.push(100.0 * mean);
