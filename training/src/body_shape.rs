@@ -158,6 +158,12 @@ mod tests {
         out
     }
 
+    /// Rows of normalised key features as a tensor `[rows, KEY_ROT_DIM]`.
+    fn rows(features: Vec<f32>, device: &Device) -> Tensor<2> {
+        let n = features.len() / KEY_ROT_DIM;
+        Tensor::from_data(TensorData::new(features, [n, KEY_ROT_DIM]), device)
+    }
+
     #[test]
     fn the_body_shape_distance_is_the_rigs_mean_joint_distance_in_cm() {
         let device = cpu_device();
@@ -175,8 +181,7 @@ mod tests {
                 sa.iter().zip(&sb).map(|(x, y)| x.distance(*y)).sum::<f32>() / JOINT_COUNT as f32;
             expected.push(100.0 * mean);
         }
-        let rows = |v: Vec<f32>| Tensor::from_data(TensorData::new(v, [5, KEY_ROT_DIM]), &device);
-        let got = values(shape.distance_cm(rows(a.clone()), rows(b)));
+        let got = values(shape.distance_cm(rows(a.clone(), &device), rows(b, &device)));
         for (g, e) in got.iter().zip(&expected) {
             assert!(e > &5.0, "random poses {e} cm apart");
             assert!(
@@ -185,7 +190,7 @@ mod tests {
             );
         }
         // A pose is no distance from itself (the epsilon aside).
-        let same = values(shape.distance_cm(rows(a.clone()), rows(a)));
+        let same = values(shape.distance_cm(rows(a.clone(), &device), rows(a, &device)));
         assert!(same.iter().all(|d| *d < 0.02), "{same:?}");
     }
 
@@ -202,12 +207,7 @@ mod tests {
         }
         let mut hips = q;
         hips[0] = Quat::from_rotation_x(0.3) * q[0];
-        let row = |r: &[Quat; JOINT_COUNT]| {
-            Tensor::from_data(
-                TensorData::new(features(&norm, r), [1, KEY_ROT_DIM]),
-                &device,
-            )
-        };
+        let row = |r: &[Quat; JOINT_COUNT]| rows(features(&norm, r), &device);
         let leaves = values(shape.distance_cm(row(&q), row(&turned)))[0];
         let tilted = values(shape.distance_cm(row(&q), row(&hips)))[0];
         assert!(leaves < 0.02, "{leaves} cm");

@@ -144,7 +144,7 @@ impl FreeRunOutcome {
     /// weighs it, `approach` frames) of the poses reached from the key, measured as `shape`
     /// says: the body shape's mean joint distance, cm. None if no step is scored.
     pub fn key_distance_cm(&self, shape: &BodyShape, approach: usize) -> Option<Tensor<1>> {
-        let [b, steps, p] = self.poses.dims();
+        let [b, steps, _] = self.poses.dims();
         let w = self.tokens.dims()[1];
         let key = self
             .tokens
@@ -152,22 +152,9 @@ impl FreeRunOutcome {
             .narrow(1, w - steps, 1)
             .reshape([b, TOKEN_DIM])
             .narrow(1, KEY_AT, KEY_ROT_DIM);
-        let weights = approach_weights(steps, approach)?;
-        let device = key.device();
-        let distances = shape
-            .distance_cm(
-                self.poses
-                    .clone()
-                    .reshape([b * steps, p])
-                    .narrow(1, ROTATIONS, KEY_ROT_DIM),
-                key.unsqueeze_dim::<3>(1)
-                    .repeat_dim(1, steps)
-                    .reshape([b * steps, KEY_ROT_DIM]),
-            )
-            .reshape([b, steps]);
-        let weights =
-            Tensor::<2>::from_data(burn::tensor::TensorData::new(weights, [1, steps]), &device);
-        Some((distances * weights).sum_dim(1).reshape([b]))
+        approach_weighted(self.poses.clone(), key, approach, |pose, key| {
+            shape.distance_cm(pose.narrow(1, ROTATIONS, KEY_ROT_DIM), key)
+        })
     }
 }
 
@@ -540,17 +527,8 @@ impl Net {
         let poses = leave_out_exploded(poses, &mut kept)?
             .clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND)
             .reshape([b, steps, P]);
-        let w = approach_weights(steps, approach)?;
-        let distances = key_distance(
-            poses.clone().reshape([b * steps, P]),
-            key.unsqueeze_dim::<3>(1)
-                .repeat_dim(1, steps)
-                .reshape([b * steps, KEY_ROT_DIM]),
-        )
-        .reshape([b, steps]);
-        let w = Tensor::<2>::from_data(burn::tensor::TensorData::new(w, [1, steps]), &device);
         Some(FreeRunOutcome {
-            key_distance: (distances * w).sum_dim(1).reshape([b]),
+            key_distance: approach_weighted(poses.clone(), key, approach, key_distance)?,
             tokens: fed,
             poses,
             kept,
@@ -630,6 +608,30 @@ fn approach_weights(steps: usize, approach: usize) -> Option<Vec<f32>> {
         .collect();
     let total: f32 = raw.iter().sum();
     (total > 0.0).then(|| raw.iter().map(|w| w / total).collect())
+}
+
+/// Per sequence `[b]`, the [`approach_weights`]-weighted sum over a rollout's poses `[b,
+/// steps, MOTION_FEATURE_DIM]` of `distance` `[rows]` from each pose `[rows,
+/// MOTION_FEATURE_DIM]` to the `key` `[b, KEY_ROT_DIM]`; None if no step is scored.
+fn approach_weighted(
+    poses: Tensor<3>,
+    key: Tensor<2>,
+    approach: usize,
+    distance: impl Fn(Tensor<2>, Tensor<2>) -> Tensor<1>,
+) -> Option<Tensor<1>> {
+    let [b, steps, p] = poses.dims();
+    let weights = approach_weights(steps, approach)?;
+    let device = key.device();
+    let distances = distance(
+        poses.reshape([b * steps, p]),
+        key.unsqueeze_dim::<3>(1)
+            .repeat_dim(1, steps)
+            .reshape([b * steps, KEY_ROT_DIM]),
+    )
+    .reshape([b, steps]);
+    let weights =
+        Tensor::<2>::from_data(burn::tensor::TensorData::new(weights, [1, steps]), &device);
+    Some((distances * weights).sum_dim(1).reshape([b]))
 }
 
 /// Per sequence `[b]`, the distance between the rotations of `pose` `[b, P]` and `key`

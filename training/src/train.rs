@@ -552,11 +552,13 @@ impl Corpus {
                         .map(|(a, b)| (a - b) * (a - b))
                         .sum()
                 };
-                let mut pick = self.any_frame(rng);
+                let first = self.any_frame(rng);
+                let (mut pick, mut farthest) = (first, apart(first));
                 for _ in 1..foreign_draws {
                     let other = self.any_frame(rng);
-                    if apart(other) > apart(pick) {
-                        pick = other;
+                    let d = apart(other);
+                    if d > farthest {
+                        (pick, farthest) = (other, d);
                     }
                 }
                 let pose = rotations(&self.dances[pick.0].motion, pick.1);
@@ -770,7 +772,8 @@ pub struct Trainer {
     /// A frozen copy of the starting weights that scores the key-pose rollouts' poses with
     /// the key hidden ([`KeyRollout::critic`]).
     critic: Option<Net>,
-    /// The body shape of the model's normalised rotations, built on the first rollout.
+    /// The body shape of the model's normalised rotations (None: the model has no
+    /// normalisation, and no rollout is scored in cm).
     shape: Option<BodyShape>,
 }
 
@@ -802,13 +805,14 @@ impl Trainer {
         let optim = AdamConfig::new()
             .with_grad_clipping(Some(GradientClippingConfig::Norm(1.0)))
             .init();
+        let shape = model.normalizer().ok().map(|n| BodyShape::new(&n, &device));
         Ok(Trainer {
             net: Some(net),
             optim,
             device,
+            shape,
             model,
             critic: None,
-            shape: None,
         })
     }
 
@@ -869,13 +873,6 @@ impl Trainer {
             });
             let mut rng = Rng::new(r.noise_seed);
             let reached = net.key_rollout(rt.tokens, styles.clone(), &r.run, &mut rng);
-            if self.shape.is_none() {
-                self.shape = self
-                    .model
-                    .normalizer()
-                    .ok()
-                    .map(|n| BodyShape::new(&n, &self.device));
-            }
             if let Some(outcome) = reached {
                 // A free run that broke (non-finite) teaches nothing; the NLL still counts.
                 let finite =
