@@ -1,7 +1,7 @@
 //! The whole trainable network: transformer context → flow over the next pose. One forward
 //! pass scores every position of a batch of sequences (teacher forcing).
 
-use burn::module::Module;
+use burn::module::{Module, ParamId};
 use burn::tensor::{Device, Tensor};
 
 use crate::body_shape::BodyShape;
@@ -239,6 +239,22 @@ impl Net {
         let distance = ((key - pose) * flag).clamp(-KEY_CONDITION_CLAMP, KEY_CONDITION_CLAMP);
         let rest = flat.narrow(1, FTG_AT, KEY_CONDITION_DIM - KEY_ROT_DIM);
         Tensor::cat(vec![ctx, distance, rest], 1)
+    }
+
+    /// The weights that read a token's key pose and nothing else: each weight matrix
+    /// `[inputs, outputs]` with its input count and the rows that multiply the key's inputs
+    /// (the embedding's, and each flow coupling's key conditioning). Those inputs are zero on a
+    /// token without a key, so these rows cannot change how the network dances with no key
+    /// pending.
+    pub fn key_rows(&self) -> Vec<(ParamId, usize, std::ops::Range<usize>)> {
+        let mut rows = vec![self.transformer.key_rows()];
+        if self.key_to_flow {
+            for step in &self.flow.steps {
+                let inputs = step.c1.w.val().dims()[0];
+                rows.push((step.c1.w.id, inputs, inputs - KEY_CONDITION_DIM..inputs));
+            }
+        }
+        rows
     }
 
     /// Writes the trainable weights into `t` (normalisation and seed entries are left as they

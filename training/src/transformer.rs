@@ -2,13 +2,13 @@
 //! windowed causal mask, one output context vector per token. Rotary positions make attention
 //! depend only on token distance, so a live sliding window sees exactly what training saw.
 
-use burn::module::{Module, Param};
+use burn::module::{Module, Param, ParamId};
 use burn::tensor::{Device, Tensor, TensorData, activation};
 
 use crate::layers::{Dense, LayerNorm, param1, param2, store};
 use model::neural::config::{NetConfig, rope_frequency};
 use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
-use model::neural::token::FLAG_AT;
+use model::neural::token::{FLAG_AT, KEY_AT, TOKEN_DIM};
 
 /// One pre-norm block: windowed causal self-attention, then a ReLU feed-forward.
 #[derive(Module, Debug)]
@@ -144,6 +144,12 @@ impl Transformer {
             b.ff2.store(t, &format!("{p}.ff2"));
         }
         self.final_ln.store(t, "final_ln");
+    }
+
+    /// The embedding's weight, its rows, and the rows that read a token's key pose, count-down
+    /// and flag (all zero on a token without a key).
+    pub fn key_rows(&self) -> (ParamId, usize, std::ops::Range<usize>) {
+        (self.embed.w.id, self.config.token_dim(), KEY_AT..TOKEN_DIM)
     }
 
     /// Context vectors `[b·s, d_model]` for tokens `[b, s, TOKEN_DIM]`; row b·s + t sees

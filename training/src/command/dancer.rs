@@ -143,6 +143,11 @@ pub struct TrainArgs {
     /// which weighs a wrist's own turn (it moves no joint) as much as the hips' (they move all).
     #[arg(long, value_name = "CM", requires = "key_rollout", value_parser = positive_cm)]
     pub rollout_key_cm: Option<f64>,
+    /// Train only the weights that read a key pose (the embedding's and the flow couplings'
+    /// rows for the key, its count-down and flag): with no key pending the network dances
+    /// exactly as the resumed model does, so the key-pose loss cannot cost the free dancing.
+    #[arg(long, requires = "resume")]
+    pub key_path_only: bool,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -640,6 +645,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &args
             .weight_average
             .map_or(String::new(), |d| format!(" --weight-average {d}"))
+        + if args.key_path_only {
+            " --key-path-only"
+        } else {
+            ""
+        }
         + &if args.speeds.is_empty() {
             String::new()
         } else {
@@ -652,6 +662,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         format!("{}; then --resume: {recipe}", previous.recipe)
     };
     let mut trainer = Trainer::new(model)?;
+    if args.key_path_only {
+        trainer = trainer.key_path_only();
+    }
     if args.rollout_keyless > 0.0 {
         trainer = trainer.with_critic()?;
     }
