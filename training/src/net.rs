@@ -12,8 +12,8 @@ use model::motion::{MOTION_FEATURE_DIM, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::tensors::{NamedTensors, WeightError};
 use model::neural::token::{
-    FLAG_AT, FTG_AT, KEY_AT, KEY_CONDITION_CLAMP, KEY_CONDITION_DIM, KEY_ROT_DIM, POSE_AT,
-    TOKEN_DIM,
+    FLAG_AT, FTG_AT, KEY_AT, KEY_CONDITION_CLAMP, KEY_CONDITION_DIM, KEY_ROT_DIM, MUSIC_AT,
+    POSE_AT, TOKEN_DIM,
 };
 
 /// Horizons of the auxiliary heads, frames (0.2, 0.4 and 1 s at 25 fps): the context must
@@ -158,6 +158,17 @@ impl FreeRunOutcome {
     }
 }
 
+/// A group of a token's inputs, and the weights that read them alone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputPath {
+    /// The key pose, its count-down and flag: the embedding's rows for them and each flow
+    /// coupling's key conditioning. Those inputs are zero on a token without a key, so these
+    /// rows cannot change how the network dances with no key pending.
+    Key,
+    /// The music features: the embedding's rows for them.
+    Music,
+}
+
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
 /// [`AUX_HORIZONS`] frames ahead.
 #[derive(Module, Debug)]
@@ -241,13 +252,13 @@ impl Net {
         Tensor::cat(vec![ctx, distance, rest], 1)
     }
 
-    /// The weights that read a token's key pose and nothing else: each weight matrix
-    /// `[inputs, outputs]` with its input count and the rows that multiply the key's inputs
-    /// (the embedding's, and each flow coupling's key conditioning). Those inputs are zero on a
-    /// token without a key, so these rows cannot change how the network dances with no key
-    /// pending.
-    pub fn key_rows(&self) -> Vec<(ParamId, usize, std::ops::Range<usize>)> {
-        let mut rows = vec![self.transformer.key_rows()];
+    /// The weights that read `path`'s inputs and nothing else: each weight matrix `[inputs,
+    /// outputs]` with its input count and the rows that multiply those inputs.
+    pub fn path_rows(&self, path: InputPath) -> Vec<(ParamId, usize, std::ops::Range<usize>)> {
+        if path == InputPath::Music {
+            return vec![self.transformer.embedding_rows(MUSIC_AT..KEY_AT)];
+        }
+        let mut rows = vec![self.transformer.embedding_rows(KEY_AT..TOKEN_DIM)];
         if self.key_to_flow {
             for step in &self.flow.steps {
                 let inputs = step.c1.w.val().dims()[0];

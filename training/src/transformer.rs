@@ -8,7 +8,7 @@ use burn::tensor::{Device, Tensor, TensorData, activation};
 use crate::layers::{Dense, LayerNorm, param1, param2, store};
 use model::neural::config::{NetConfig, rope_frequency};
 use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
-use model::neural::token::{FLAG_AT, KEY_AT, TOKEN_DIM};
+use model::neural::token::FLAG_AT;
 
 /// One pre-norm block: windowed causal self-attention, then a ReLU feed-forward.
 #[derive(Module, Debug)]
@@ -146,10 +146,12 @@ impl Transformer {
         self.final_ln.store(t, "final_ln");
     }
 
-    /// The embedding's weight, its rows, and the rows that read a token's key pose, count-down
-    /// and flag (all zero on a token without a key).
-    pub fn key_rows(&self) -> (ParamId, usize, std::ops::Range<usize>) {
-        (self.embed.w.id, self.config.token_dim(), KEY_AT..TOKEN_DIM)
+    /// The embedding's weight, its rows, and `inputs`: the rows that read those token inputs.
+    pub fn embedding_rows(
+        &self,
+        inputs: std::ops::Range<usize>,
+    ) -> (ParamId, usize, std::ops::Range<usize>) {
+        (self.embed.w.id, self.config.token_dim(), inputs)
     }
 
     /// Context vectors `[b·s, d_model]` for tokens `[b, s, TOKEN_DIM]`; row b·s + t sees

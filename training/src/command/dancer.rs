@@ -16,13 +16,40 @@ use model::neural::rng::Rng;
 use model::neural::tensors::init_net;
 use model::neural::token::Normalizer;
 
-use crate::net::FreeRun;
+use crate::net::{FreeRun, InputPath};
 use crate::train::{
     Batch, Corpus, CriticTerm, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
 };
 use crate::weight_average::WeightAverage;
 
 /// Options of `danced-train dancer`.
+/// The inputs whose weights alone a second stage trains (`--train-only`).
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrainedInputs {
+    /// The key pose, its count-down and flag.
+    Key,
+    /// The music features.
+    Music,
+}
+
+impl TrainedInputs {
+    /// The option's value as written.
+    pub fn name(self) -> &'static str {
+        match self {
+            TrainedInputs::Key => "key",
+            TrainedInputs::Music => "music",
+        }
+    }
+
+    /// The network's input path.
+    pub fn path(self) -> InputPath {
+        match self {
+            TrainedInputs::Key => InputPath::Key,
+            TrainedInputs::Music => InputPath::Music,
+        }
+    }
+}
+
 #[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
     /// The shared data folder (tang2018 dances are built from it).
@@ -143,11 +170,13 @@ pub struct TrainArgs {
     /// which weighs a wrist's own turn (it moves no joint) as much as the hips' (they move all).
     #[arg(long, value_name = "CM", requires = "key_rollout", value_parser = positive_cm)]
     pub rollout_key_cm: Option<f64>,
-    /// Train only the weights that read a key pose (the embedding's and the flow couplings'
-    /// rows for the key, its count-down and flag): with no key pending the network dances
-    /// exactly as the resumed model does, so the key-pose loss cannot cost the free dancing.
-    #[arg(long, requires = "resume")]
-    pub key_path_only: bool,
+    /// Train only the weights that read these inputs of the resumed model: `key` (the
+    /// embedding's and the flow couplings' rows for the key pose, its count-down and flag:
+    /// with no key pending the network dances exactly as the resumed model does, so the
+    /// key-pose loss cannot cost the free dancing) or `music` (the embedding's rows for the
+    /// music features).
+    #[arg(long, value_enum, value_name = "INPUTS", requires = "resume")]
+    pub train_only: Option<TrainedInputs>,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -645,11 +674,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + &args
             .weight_average
             .map_or(String::new(), |d| format!(" --weight-average {d}"))
-        + if args.key_path_only {
-            " --key-path-only"
-        } else {
-            ""
-        }
+        + &args
+            .train_only
+            .map_or(String::new(), |p| format!(" --train-only {}", p.name()))
         + &if args.speeds.is_empty() {
             String::new()
         } else {
@@ -662,8 +689,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         format!("{}; then --resume: {recipe}", previous.recipe)
     };
     let mut trainer = Trainer::new(model)?;
-    if args.key_path_only {
-        trainer = trainer.key_path_only();
+    if let Some(inputs) = args.train_only {
+        trainer = trainer.training_only(inputs.path());
     }
     if args.rollout_keyless > 0.0 {
         trainer = trainer.with_critic()?;
