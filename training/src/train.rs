@@ -1223,6 +1223,16 @@ mod tests {
         (before, rollout(0.0))
     }
 
+    /// [`periodic_trainer`] after `steps` teacher-forced steps: past the flow's
+    /// zero-initialised couplings, which pass no gradient back to the context at first.
+    fn trained_periodic_trainer(steps: usize) -> (NetConfig, Corpus, Trainer, Rng) {
+        let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
+        for _ in 0..steps {
+            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
+        }
+        (c, corpus, tr, rng)
+    }
+
     #[test]
     fn key_rollout_steps_pull_the_free_run_onto_the_key() {
         let (before, after) = key_lesson(None);
@@ -1249,10 +1259,7 @@ mod tests {
 
     #[test]
     fn trained_on_the_key_path_only_it_dances_as_before_with_no_key_pending() {
-        let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
-        for _ in 0..60 {
-            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
-        }
+        let (c, corpus, mut tr, _) = trained_periodic_trainer(60);
         let mut start = tr.model().clone();
         add_key_to_flow(&mut start).unwrap();
         let mut tr = Trainer::new(start.clone())
@@ -1344,11 +1351,7 @@ mod tests {
 
     #[test]
     fn trained_on_the_music_path_only_only_the_music_rows_move() {
-        let (_, corpus, mut tr, mut rng) = periodic_trainer(None);
-        // Past the flow's zero-initialised couplings, which pass no gradient back at first.
-        for _ in 0..60 {
-            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
-        }
+        let (_, corpus, mut tr, mut rng) = trained_periodic_trainer(60);
         let start = tr.model().clone();
         let mut tr = Trainer::new(start.clone())
             .unwrap()
@@ -1439,11 +1442,8 @@ mod tests {
 
     #[test]
     fn the_keyless_critic_draws_the_free_run_towards_dancing_and_stays_frozen() {
-        let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
         // A critic that has learnt the dance a little.
-        for _ in 0..60 {
-            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
-        }
+        let (c, corpus, mut tr, _) = trained_periodic_trainer(60);
         let start = tr.model().clone();
         let at = c.window - 1;
         // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
@@ -1486,10 +1486,7 @@ mod tests {
 
     #[test]
     fn a_free_rollout_announces_no_key_and_the_critic_alone_steers_it() {
-        let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
-        for _ in 0..300 {
-            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
-        }
+        let (c, corpus, mut tr, _) = trained_periodic_trainer(300);
         let start = tr.model().clone();
         let batch = corpus.free_rollout_batch(&mut Rng::new(7), 4);
         assert_eq!(batch.sequences, 4);
