@@ -22,7 +22,6 @@ use crate::train::{
 };
 use crate::weight_average::WeightAverage;
 
-/// Options of `danced-train dancer`.
 /// The inputs whose weights alone a second stage trains (`--train-only`).
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TrainedInputs {
@@ -50,6 +49,7 @@ impl TrainedInputs {
     }
 }
 
+/// Options of `danced-train dancer`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
     /// The shared data folder (tang2018 dances are built from it).
