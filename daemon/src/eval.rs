@@ -187,6 +187,10 @@ pub struct TransitionFid {
     /// The windows ending on the same frames as `before_key`, of the same songs danced with the
     /// same noise and no key pose at all.
     pub free: f64,
+    /// Mean joint speed over the `before_key` windows, m/s.
+    pub before_key_speed: f64,
+    /// Mean joint speed over the `free` windows, m/s.
+    pub free_speed: f64,
     /// Windows of each kind.
     pub windows: usize,
 }
@@ -412,6 +416,7 @@ impl EvalSet {
         let len = (TRANSITION_S * TANG_FPS).round() as usize;
         let skeleton = Skeleton::default_adult();
         let (mut before, mut after, mut free) = (Vec::new(), Vec::new(), Vec::new());
+        let mut speeds = (0.0, 0.0);
         for pass in 0..TRANSITION_PASSES {
             let pass_seed = seed.wrapping_add(pass as u64);
             for (i, d) in self.validation.iter().enumerate() {
@@ -435,6 +440,8 @@ impl EvalSet {
                         before.push(b);
                         after.push(a);
                         free.push(f);
+                        speeds.0 += window_speed(&cued, start, start + len);
+                        speeds.1 += window_speed(&uncued, start, start + len);
                     }
                 }
             }
@@ -443,6 +450,8 @@ impl EvalSet {
             before_key: fid_k(&self.train_kinetic_short, &before)?,
             after_key: fid_k(&self.train_kinetic_short, &after)?,
             free: fid_k(&self.train_kinetic_short, &free)?,
+            before_key_speed: speeds.0 / before.len().max(1) as f64,
+            free_speed: speeds.1 / before.len().max(1) as f64,
             windows: before.len(),
         })
     }
@@ -659,6 +668,24 @@ pub struct MusicRow {
     pub songs: usize,
 }
 
+/// The mean speed of the joints of `track` (positions, [`JOINT_COUNT`] a frame) from frame
+/// `f − 1` to frame `f`, m/s.
+fn joint_speed(track: &[glam::Vec3], f: usize) -> f64 {
+    (0..JOINT_COUNT)
+        .map(|j| f64::from(track[f * JOINT_COUNT + j].distance(track[(f - 1) * JOINT_COUNT + j])))
+        .sum::<f64>()
+        * TANG_FPS
+        / JOINT_COUNT as f64
+}
+
+/// The mean joint speed of `track` over frames `from + 1 .. to` (each against the one before),
+/// m/s; 0 for fewer than two frames.
+fn window_speed(track: &[glam::Vec3], from: usize, to: usize) -> f64 {
+    let to = to.min(track.len() / JOINT_COUNT);
+    let steps = to.saturating_sub(from + 1);
+    (from + 1..to).map(|f| joint_speed(track, f)).sum::<f64>() / steps.max(1) as f64
+}
+
 /// Mean joint speed (m/s) of a joint `track` at 25 fps (as [`Skeleton::trajectory`] lays it
 /// out) in frames inside `spans` (seconds) and outside them, skipping the first 2 s.
 pub fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64, f64) {
@@ -667,13 +694,7 @@ pub fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64,
     let (mut inside, mut outside) = ((0.0, 0usize), (0.0, 0usize));
     for f in (2.0 * fps) as usize..frames {
         let t = f as f64 / fps;
-        let speed: f64 = (0..JOINT_COUNT)
-            .map(|j| {
-                f64::from(track[f * JOINT_COUNT + j].distance(track[(f - 1) * JOINT_COUNT + j]))
-            })
-            .sum::<f64>()
-            * fps
-            / JOINT_COUNT as f64;
+        let speed = joint_speed(track, f);
         let acc = if spans.iter().any(|&(a, b)| (a..b).contains(&t)) {
             &mut inside
         } else {
@@ -916,6 +937,23 @@ mod tests {
                 "pass {pass}"
             );
         }
+    }
+
+    #[test]
+    fn a_windows_joint_speed_is_the_joints_mean_speed_over_it() {
+        // Every joint still for 10 frames, then moving 4 cm a frame (1 m/s at 25 fps) along x.
+        let track: Vec<glam::Vec3> = (0..30usize)
+            .flat_map(|f| {
+                let x = 0.04 * f.saturating_sub(10) as f32;
+                (0..JOINT_COUNT).map(move |j| glam::Vec3::new(x, j as f32 * 0.1, 0.0))
+            })
+            .collect();
+        assert_eq!(window_speed(&track, 0, 10), 0.0);
+        assert!((window_speed(&track, 10, 30) - 1.0).abs() < 1e-5);
+        // Half still, half moving: the mean of the steps.
+        assert!((window_speed(&track, 5, 16) - 0.5).abs() < 1e-5);
+        // A window running past the track is cut at its end.
+        assert!((window_speed(&track, 20, 40) - 1.0).abs() < 1e-5);
     }
 
     #[test]

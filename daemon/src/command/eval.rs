@@ -294,7 +294,7 @@ fn key_tables(
     }
     print!("{key_table}");
     println!(
-        "\n| system | FID_k of the {s} s before key poses ↓ | of the {s} s after them ↓ | of the same windows danced free ↓ | before / free (target ≤ 1.25) | after / free | windows |\n| --- | --- | --- | --- | --- | --- | --- |",
+        "\n| system | FID_k of the {s} s before key poses ↓ | of the {s} s after them ↓ | of the same windows danced free ↓ | before / free (target ≤ 1.25) | after / free | joint speed before / free, m/s | windows |\n| --- | --- | --- | --- | --- | --- | --- | --- |",
         s = crate::eval::TRANSITION_S
     );
     let mut led = crate::dancer::neural_dancer(model, o.seed)?;
@@ -311,12 +311,14 @@ fn key_tables(
         let t = 0.5;
         let f = set.transition_fid(dancer, t, o.seed, &bank)?;
         println!(
-            "| {name} T={t} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {} |",
+            "| {name} T={t} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} / {:.2} | {} |",
             f.before_key,
             f.after_key,
             f.free,
             f.before_key / f.free,
             f.after_key / f.free,
+            f.before_key_speed,
+            f.free_speed,
             f.windows
         );
     }
