@@ -1,7 +1,7 @@
 //! Small burn building blocks (dense layer, layer norm) loaded from and stored to
 //! [`NamedTensors`], so training weights and live weights are the same numbers.
 
-use burn::module::{Module, Param};
+use burn::module::{Module, Param, ParamId};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use model::neural::config::LN_EPS;
@@ -65,6 +65,15 @@ pub fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
         .convert::<f32>()
         .try_to_vec::<f32>()
         .unwrap_or_default()
+}
+
+/// Rows of a weight matrix `[inputs, outputs]`: those that multiply the inputs `rows`.
+#[derive(Clone, Debug)]
+pub struct WeightRows {
+    /// The weight matrix.
+    pub param: ParamId,
+    /// The rows (inputs) meant.
+    pub rows: std::ops::Range<usize>,
 }
 
 /// Stores a parameter under `name`.

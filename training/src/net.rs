@@ -1,12 +1,12 @@
 //! The whole trainable network: transformer context → flow over the next pose. One forward
 //! pass scores every position of a batch of sequences (teacher forcing).
 
-use burn::module::{Module, ParamId};
+use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
 use crate::body_shape::BodyShape;
 use crate::flow::Flow;
-use crate::layers::Dense;
+use crate::layers::{Dense, WeightRows};
 use crate::transformer::Transformer;
 use model::motion::{MOTION_FEATURE_DIM, ROTATIONS};
 use model::neural::config::NetConfig;
@@ -158,8 +158,9 @@ impl FreeRunOutcome {
     }
 }
 
-/// A group of a token's inputs, and the weights that read them alone.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A group of a token's inputs, and the weights that read them alone (`danced-train dancer
+/// --train-only`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum InputPath {
     /// The key pose, its count-down and flag: the embedding's rows for them and each flow
     /// coupling's key conditioning. Those inputs are zero on a token without a key, so these
@@ -252,9 +253,8 @@ impl Net {
         Tensor::cat(vec![ctx, distance, rest], 1)
     }
 
-    /// The weights that read `path`'s inputs and nothing else: each weight matrix `[inputs,
-    /// outputs]` with its input count and the rows that multiply those inputs.
-    pub fn path_rows(&self, path: InputPath) -> Vec<(ParamId, usize, std::ops::Range<usize>)> {
+    /// The weights that read `path`'s inputs and nothing else.
+    pub fn path_rows(&self, path: InputPath) -> Vec<WeightRows> {
         if path == InputPath::Music {
             return vec![self.transformer.embedding_rows(MUSIC_AT..KEY_AT)];
         }
@@ -262,7 +262,10 @@ impl Net {
         if self.key_to_flow {
             for step in &self.flow.steps {
                 let inputs = step.c1.w.val().dims()[0];
-                rows.push((step.c1.w.id, inputs, inputs - KEY_CONDITION_DIM..inputs));
+                rows.push(WeightRows {
+                    param: step.c1.w.id,
+                    rows: inputs - KEY_CONDITION_DIM..inputs,
+                });
             }
         }
         rows

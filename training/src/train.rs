@@ -8,7 +8,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::body_shape::BodyShape;
 use crate::device::{cpu_device, training_device};
-use crate::layers::values;
+use crate::layers::{WeightRows, values};
 use crate::net::{AUX_HORIZONS, FreeRun, FreeRunOutcome, InputPath, Net};
 use dsp::feature::FEATURE_DIM as M;
 use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
@@ -769,7 +769,7 @@ fn keep_path(net: &Net, path: InputPath, grads: &mut GradientsParams, device: &D
     /// Removes each parameter's gradient, and registers the path's rows' back.
     struct PathRowsOnly<'a> {
         grads: &'a mut GradientsParams,
-        rows: Vec<(burn::module::ParamId, usize, std::ops::Range<usize>)>,
+        rows: Vec<WeightRows>,
         device: &'a Device,
     }
     impl burn::module::ModuleVisitor for PathRowsOnly<'_> {
@@ -777,13 +777,14 @@ fn keep_path(net: &Net, path: InputPath, grads: &mut GradientsParams, device: &D
             let Some(g) = self.grads.remove::<D>(param.id) else {
                 return;
             };
-            if let Some((_, inputs, keyed)) = self.rows.iter().find(|r| r.0 == param.id)
+            if let Some(kept) = self.rows.iter().find(|r| r.param == param.id)
                 && D == 2
             {
-                let mask = (0..*inputs)
-                    .map(|i| if keyed.contains(&i) { 1.0f32 } else { 0.0 })
+                let inputs = g.dims()[0];
+                let mask = (0..inputs)
+                    .map(|i| if kept.rows.contains(&i) { 1.0f32 } else { 0.0 })
                     .collect();
-                let mask = Tensor::<D>::from_data(TensorData::new(mask, [*inputs, 1]), self.device);
+                let mask = Tensor::<D>::from_data(TensorData::new(mask, [inputs, 1]), self.device);
                 self.grads.register(param.id, g * mask);
             }
         }

@@ -2,10 +2,10 @@
 //! windowed causal mask, one output context vector per token. Rotary positions make attention
 //! depend only on token distance, so a live sliding window sees exactly what training saw.
 
-use burn::module::{Module, Param, ParamId};
+use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData, activation};
 
-use crate::layers::{Dense, LayerNorm, param1, param2, store};
+use crate::layers::{Dense, LayerNorm, WeightRows, param1, param2, store};
 use model::neural::config::{NetConfig, rope_frequency};
 use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
 use model::neural::token::FLAG_AT;
@@ -146,12 +146,12 @@ impl Transformer {
         self.final_ln.store(t, "final_ln");
     }
 
-    /// The embedding's weight, its rows, and `inputs`: the rows that read those token inputs.
-    pub fn embedding_rows(
-        &self,
-        inputs: std::ops::Range<usize>,
-    ) -> (ParamId, usize, std::ops::Range<usize>) {
-        (self.embed.w.id, self.config.token_dim(), inputs)
+    /// The embedding weight's rows that read the token inputs `inputs`.
+    pub fn embedding_rows(&self, inputs: std::ops::Range<usize>) -> WeightRows {
+        WeightRows {
+            param: self.embed.w.id,
+            rows: inputs,
+        }
     }
 
     /// Context vectors `[b·s, d_model]` for tokens `[b, s, TOKEN_DIM]`; row b·s + t sees

@@ -22,33 +22,6 @@ use crate::train::{
 };
 use crate::weight_average::WeightAverage;
 
-/// The inputs whose weights alone a second stage trains (`--train-only`).
-#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TrainedInputs {
-    /// The key pose, its count-down and flag.
-    Key,
-    /// The music features.
-    Music,
-}
-
-impl TrainedInputs {
-    /// The option's value as written.
-    pub fn name(self) -> &'static str {
-        match self {
-            TrainedInputs::Key => "key",
-            TrainedInputs::Music => "music",
-        }
-    }
-
-    /// The network's input path.
-    pub fn path(self) -> InputPath {
-        match self {
-            TrainedInputs::Key => InputPath::Key,
-            TrainedInputs::Music => InputPath::Music,
-        }
-    }
-}
-
 /// Options of `danced-train dancer`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
@@ -176,7 +149,7 @@ pub struct TrainArgs {
     /// key-pose loss cannot cost the free dancing) or `music` (the embedding's rows for the
     /// music features).
     #[arg(long, value_enum, value_name = "INPUTS", requires = "resume")]
-    pub train_only: Option<TrainedInputs>,
+    pub train_only: Option<InputPath>,
     /// Temperature of the key-pose rollouts' samples.
     #[arg(long, default_value_t = 0.5)]
     pub rollout_temperature: f32,
@@ -676,7 +649,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             .map_or(String::new(), |d| format!(" --weight-average {d}"))
         + &args
             .train_only
-            .map_or(String::new(), |p| format!(" --train-only {}", p.name()))
+            .and_then(|p| clap::ValueEnum::to_possible_value(&p))
+            .map_or(String::new(), |v| format!(" --train-only {}", v.get_name()))
         + &if args.speeds.is_empty() {
             String::new()
         } else {
@@ -689,8 +663,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         format!("{}; then --resume: {recipe}", previous.recipe)
     };
     let mut trainer = Trainer::new(model)?;
-    if let Some(inputs) = args.train_only {
-        trainer = trainer.training_only(inputs.path());
+    if let Some(path) = args.train_only {
+        trainer = trainer.training_only(path);
     }
     if args.rollout_keyless > 0.0 {
         trainer = trainer.with_critic()?;
