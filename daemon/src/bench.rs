@@ -132,14 +132,12 @@ impl SynthSongInfo {
         self.drumless_intro_bars > 0.0
     }
 
-    /// Its quiet section and drumless intro, seconds.
-    pub fn quiet_parts(&self) -> Vec<(f64, f64)> {
-        let mut parts: Vec<(f64, f64)> = self.quiet.into_iter().collect();
-        if self.has_intro() {
+    /// Its drumless intro, seconds from the start, if any.
+    pub fn intro(&self) -> Option<(f64, f64)> {
+        self.has_intro().then(|| {
             let bars_s = self.drumless_intro_bars * self.beats_per_bar * 60.0 / self.bpm;
-            parts.push((0.0, self.first_beat_s + bars_s));
-        }
-        parts
+            (0.0, self.first_beat_s + bars_s)
+        })
     }
 }
 

@@ -631,8 +631,10 @@ struct MusicSong {
     /// The same beats half a beat later: where a dancer at chance is as often as on the beat.
     off_beats: Vec<f64>,
     bpm: f64,
-    /// Quiet sections and drumless intros, seconds.
-    quiet: Vec<(f64, f64)>,
+    /// The quiet section, seconds, if any.
+    section: Option<(f64, f64)>,
+    /// The drumless intro, seconds, if any.
+    intro: Option<(f64, f64)>,
 }
 
 /// Songs with exact beats that are in no training dance (`synth-beats`): only the music-side
@@ -660,6 +662,14 @@ pub struct MusicRow {
     pub quiet_speed_ratio: f64,
     /// Songs with a quiet part.
     pub quiet_songs: usize,
+    /// The same in quiet sections alone (against the rest: neither section nor intro).
+    pub section_speed_ratio: f64,
+    /// Songs with a quiet section.
+    pub section_songs: usize,
+    /// The same in drumless intros alone.
+    pub intro_speed_ratio: f64,
+    /// Songs with a drumless intro.
+    pub intro_songs: usize,
     /// Transflower beat offset, seconds.
     pub beat_offset_s: f64,
     /// Freezes, summed over songs.
@@ -726,8 +736,8 @@ impl MusicSet {
                 &mut |_, _| {},
             )
             .with_context(|| format!("analysing {}", item.audio.display()))?;
-            let (bpm, quiet) = crate::bench::SynthSongInfo::read(&item.audio)
-                .map_or((0.0, Vec::new()), |i| (i.bpm, i.quiet_parts()));
+            let info = crate::bench::SynthSongInfo::read(&item.audio);
+            let bpm = info.as_ref().map_or(0.0, |i| i.bpm);
             let off_beats = half_beat_later(&item.beats);
             songs.push(MusicSong {
                 features: dsp::predicted_stream(
@@ -737,7 +747,8 @@ impl MusicSet {
                 beats: item.beats,
                 off_beats,
                 bpm,
-                quiet,
+                section: info.as_ref().and_then(|i| i.quiet),
+                intro: info.as_ref().and_then(|i| i.intro()),
             });
         }
         Ok(MusicSet { songs })
@@ -777,11 +788,20 @@ impl MusicSet {
                 row.on_minus_off[b] += on - beat_align(&track, &song.off_beats);
                 row.band_songs[b] += 1;
             }
-            if !song.quiet.is_empty() {
-                let (inside, outside) = speed_inside_and_out(&p, &song.quiet);
-                if outside > 0.0 {
-                    row.quiet_speed_ratio += inside / outside;
-                    row.quiet_songs += 1;
+            let parts: Vec<(f64, f64)> = song.section.into_iter().chain(song.intro).collect();
+            let (quiet, rest) = speed_inside_and_out(&p, &parts);
+            if !parts.is_empty() && rest > 0.0 {
+                row.quiet_speed_ratio += quiet / rest;
+                row.quiet_songs += 1;
+                // Within the first 2 s (left out) an intro may have no frame: no ratio then.
+                let within = |span: (f64, f64)| speed_inside_and_out(&p, &[span]).0;
+                if let Some(s) = song.section {
+                    row.section_speed_ratio += within(s) / rest;
+                    row.section_songs += 1;
+                }
+                if let Some(s) = song.intro.filter(|s| s.1 > 2.0) {
+                    row.intro_speed_ratio += within(s) / rest;
+                    row.intro_songs += 1;
                 }
             }
             if let Ok(o) = beat_offset(&track, Joint::Hips.index(), &song.beats) {
@@ -793,6 +813,8 @@ impl MusicSet {
             *d /= k.max(1) as f64;
         }
         row.quiet_speed_ratio /= row.quiet_songs.max(1) as f64;
+        row.section_speed_ratio /= row.section_songs.max(1) as f64;
+        row.intro_speed_ratio /= row.intro_songs.max(1) as f64;
         Ok(row)
     }
 }
@@ -801,15 +823,17 @@ impl MusicSet {
 pub fn music_table(rows: &[MusicRow]) -> String {
     let bands = rows.first().map_or([0; 3], |r| r.band_songs);
     let mut s = format!(
-        "| system | BeatAlign ↑ | vs other songs | on − half-beat-shifted beats, 60–100 / 100–130 / 130–180 BPM ({} / {} / {} songs) ↑ | joint speed quiet / rest ({} songs) ↓ | beat offset s ↓ | freezes |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+        "| system | BeatAlign ↑ | vs other songs | on − half-beat-shifted beats, 60–100 / 100–130 / 130–180 BPM ({} / {} / {} songs) ↑ | joint speed quiet / rest ({} songs) ↓ | of which quiet sections ({}); drumless intros ({}) | beat offset s ↓ | freezes |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         bands[0],
         bands[1],
         bands[2],
-        rows.first().map_or(0, |r| r.quiet_songs)
+        rows.first().map_or(0, |r| r.quiet_songs),
+        rows.first().map_or(0, |r| r.section_songs),
+        rows.first().map_or(0, |r| r.intro_songs)
     );
     for r in rows {
         s += &format!(
-            "| {} | {:.3} | {:.3} | {:+.3} / {:+.3} / {:+.3} | {:.2} | {:.3} | {} |\n",
+            "| {} | {:.3} | {:.3} | {:+.3} / {:+.3} / {:+.3} | {:.2} | {:.2}; {:.2} | {:.3} | {} |\n",
             r.system,
             r.beat_align,
             r.beat_align_other,
@@ -817,6 +841,8 @@ pub fn music_table(rows: &[MusicRow]) -> String {
             r.on_minus_off[1],
             r.on_minus_off[2],
             r.quiet_speed_ratio,
+            r.section_speed_ratio,
+            r.intro_speed_ratio,
             r.beat_offset_s,
             r.freezes
         );

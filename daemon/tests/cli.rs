@@ -54,11 +54,11 @@ fn analyze_writes_beats_onsets_features_and_plot() {
     assert!(npy.starts_with(b"\x93NUMPY"));
     let header = String::from_utf8_lossy(&npy[..128]);
     assert!(
-        header.contains("'shape': (499, 83)") || header.contains("'shape': (500, 83)"),
+        header.contains("'shape': (499, 84)") || header.contains("'shape': (500, 84)"),
         "{header}"
     );
     let sidecar = std::fs::read_to_string(dir.join("f.json")).unwrap();
-    assert!(sidecar.contains("\"layout_version\": 1") && sidecar.contains("\"tempo_bpm\""));
+    assert!(sidecar.contains("\"layout_version\": 2") && sidecar.contains("\"relative_level_db\""));
     let png = std::fs::read(dir.join("p.png")).unwrap();
     assert!(png.starts_with(b"\x89PNG") && png.len() > 20_000);
     std::fs::remove_dir_all(&dir).ok();

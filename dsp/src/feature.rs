@@ -1,6 +1,7 @@
 //! The feature vector the dance model consumes, resampled from analysis hops to the model rate.
 //!
-//! Layout version 1 (`FEATURE_DIM` = 83 values per frame, all finite):
+//! Layout version 2 (`FEATURE_DIM` = 84 values per frame, all finite; version 1 had the first
+//! 83):
 //!
 //! | index | name | unit, range | declared latency |
 //! | --- | --- | --- | --- |
@@ -11,6 +12,7 @@
 //! | 69–80 | chroma, index 0 = C, A = 440 Hz, max-normalised | [0, 1] | long window |
 //! | 81 | RMS energy | dBFS, ≥ −120 | short window |
 //! | 82 | tempo (0 while no beat is heard) | BPM | short window |
+//! | 83 | level below the recent peak ([`LevelFollower`], from index 81) | dB, [−60, 0] | short window, smoothed over 0.4 s |
 //!
 //! "Short window" means the feature describes audio centred half a short window (23 ms) before
 //! the frame's stream time; "long window" means 93 ms before. Both add the resampler's delay
@@ -23,12 +25,15 @@
 
 use crate::grid::BeatGrid;
 use crate::hop::HopFrame;
+use crate::level_follower::LevelFollower;
 use crate::mel::MEL_BANDS;
 
 /// Version of the layout below; bump it whenever an index or a unit changes.
-pub const FEATURE_LAYOUT_VERSION: u32 = 1;
+pub const FEATURE_LAYOUT_VERSION: u32 = 2;
 /// Values per feature frame.
-pub const FEATURE_DIM: usize = 83;
+pub const FEATURE_DIM: usize = 84;
+/// Values per frame in layout version 1 (everything before [`FeatureLayout::RELATIVE_LEVEL`]).
+pub const FEATURE_DIM_V1: usize = 83;
 
 /// Where each named feature lives in a [`FeatureFrame`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,6 +58,8 @@ impl FeatureLayout {
     pub const ENERGY: usize = Self::CHROMA + 12;
     /// Tempo in BPM.
     pub const TEMPO: usize = Self::ENERGY + 1;
+    /// Level below the recent peak in dB ([`LevelFollower`]).
+    pub const RELATIVE_LEVEL: usize = Self::TEMPO + 1;
 
     /// Names of every value, in order (for headers and documentation).
     pub fn names() -> Vec<String> {
@@ -62,12 +69,13 @@ impl FeatureLayout {
             "C", "Db", "D", "Eb", "E", "F", "Gb", "G", "Ab", "A", "Bb", "B",
         ];
         v.extend(PC.iter().map(|p| format!("chroma_{p}")));
-        v.extend(["energy_db", "tempo_bpm"].map(String::from));
+        v.extend(["energy_db", "tempo_bpm", "relative_level_db"].map(String::from));
         v
     }
 }
 
-const _: () = assert!(FeatureLayout::TEMPO + 1 == FEATURE_DIM);
+const _: () = assert!(FeatureLayout::RELATIVE_LEVEL + 1 == FEATURE_DIM);
+const _: () = assert!(FeatureLayout::RELATIVE_LEVEL == FEATURE_DIM_V1);
 
 /// One model frame of features.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -128,9 +136,10 @@ pub fn predicted_stream(frames: &[FeatureFrame], horizon: usize) -> Vec<[f32; FE
 
 /// Resamples analysis hops (86.13 Hz) to frames at the model rate: means for spectra and energy,
 /// the maximum for onset strength (so no attack falls between frames), the latest value for
-/// phases and tempo.
+/// phases and tempo; the relative level follows the framed energy.
 pub struct FeatureFramer {
     rate: f64,
+    level: LevelFollower,
     next_index: u64,
     sum: [f32; FEATURE_DIM],
     onset_max: f32,
@@ -142,6 +151,7 @@ impl FeatureFramer {
     pub fn new(rate: f64) -> Self {
         Self {
             rate,
+            level: LevelFollower::new(rate),
             next_index: 0,
             sum: [0.0; FEATURE_DIM],
             onset_max: 0.0,
@@ -179,6 +189,7 @@ impl FeatureFramer {
             values[FeatureLayout::CHROMA + i] = self.sum[FeatureLayout::CHROMA + i] / n;
         }
         values[FeatureLayout::ENERGY] = self.sum[FeatureLayout::ENERGY] / n;
+        values[FeatureLayout::RELATIVE_LEVEL] = self.level.next(values[FeatureLayout::ENERGY]);
         values[FeatureLayout::ONSET] = self.onset_max;
         let beat = std::f64::consts::TAU * hop.beat_phase;
         let bar = std::f64::consts::TAU * hop.bar_phase;

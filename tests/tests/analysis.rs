@@ -90,6 +90,72 @@ fn demo_song_beats_bars_and_features() {
     }
 }
 
+/// Mean of feature `k` over the frames from `a_s` to `b_s` (stream seconds).
+fn mean_between(frames: &[dsp::FeatureFrame], k: usize, a_s: f64, b_s: f64) -> f32 {
+    let inside: Vec<f32> = frames
+        .iter()
+        .filter(|f| (a_s..b_s).contains(&f.time_s))
+        .map(|f| f.values[k])
+        .collect();
+    inside.iter().sum::<f32>() / inside.len().max(1) as f32
+}
+
+#[test]
+fn the_relative_level_tells_a_breakdown_from_a_quietly_mastered_song() {
+    let demo = demo_track(30.0);
+    let gain = |db: f32| 10f32.powf(db / 20.0);
+    let quiet_song: Vec<f32> = demo.samples.iter().map(|x| x * gain(-12.0)).collect();
+    let mut breakdown = demo.samples.clone();
+    let channels = 2;
+    for (i, x) in breakdown.iter_mut().enumerate() {
+        let t = (i / channels) as f64 / f64::from(DEMO_RATE);
+        if (14.0..20.0).contains(&t) {
+            *x *= gain(-12.0);
+        }
+    }
+    let run = |samples: &[f32]| {
+        analyze_samples(
+            "demo",
+            samples,
+            DEMO_RATE,
+            channels as u16,
+            options(Some(25.0)),
+        )
+        .unwrap()
+        .features
+    };
+    let (loud, quiet, broken) = (run(&demo.samples), run(&quiet_song), run(&breakdown));
+    let level = FeatureLayout::RELATIVE_LEVEL;
+    let energy = FeatureLayout::ENERGY;
+    // The quietly mastered song and the breakdown sit at one absolute level...
+    let quiet_energy = mean_between(&quiet, energy, 15.0, 20.0);
+    let breakdown_energy = mean_between(&broken, energy, 15.0, 20.0);
+    assert!(
+        (quiet_energy - breakdown_energy).abs() < 1.0,
+        "{quiet_energy} against {breakdown_energy} dBFS"
+    );
+    // ...but only the breakdown is quieter than before.
+    let steady = mean_between(&quiet, level, 15.0, 20.0);
+    let dropped = mean_between(&broken, level, 15.0, 20.0);
+    assert!(steady > -4.0, "steady song {steady} dB below its peak");
+    let loud_steady = mean_between(&loud, level, 15.0, 20.0);
+    assert!(
+        (steady - loud_steady).abs() < 0.5,
+        "the mastering moves it: {steady} against {loud_steady} dB"
+    );
+    assert!(
+        dropped < steady - 8.0,
+        "breakdown {dropped} dB, steady {steady} dB"
+    );
+    // A second after the music returns, it reads as loud as the unbroken song.
+    let back = mean_between(&broken, level, 21.0, 26.0);
+    let unbroken = mean_between(&loud, level, 21.0, 26.0);
+    assert!(
+        (back - unbroken).abs() < 0.5,
+        "{back} against {unbroken} dB"
+    );
+}
+
 #[test]
 fn hand_annotated_onsets_are_found() {
     let Some(data) = shared_data() else { return };

@@ -28,7 +28,7 @@ pub struct AnalyzeArgs {
     /// Write onsets here: one time in seconds per line.
     #[arg(long)]
     pub onsets_out: Option<PathBuf>,
-    /// Write model features here as float32 .npy [frames, 83] (+ a .json sidecar with the layout).
+    /// Write model features here as float32 .npy [frames, 84] (+ a .json sidecar with the layout).
     #[arg(long)]
     pub features_out: Option<PathBuf>,
     /// Model frame rate for --features-out, Hz.

@@ -1028,7 +1028,10 @@ mod tests {
         // Every pose shown over 200 frames, with the cues `cues` gives each frame.
         let run = |cues: &dyn Fn(u32) -> Option<KeyPoseTarget>| {
             let mut d = dancer(0.05);
+            // The foot lock works on the pose shown, so a leg it holds through an overlay
+            // stays held after it: off, to compare the network's dance alone.
             d.set_foot_lock(0.0);
+            d.set_foot_plant(0.0);
             d.reset(2);
             let music = [[0.1f32; FEATURE_DIM]; 3];
             let mut pose = Pose::rest();

@@ -338,11 +338,6 @@ impl NeuralModel {
             format!("v{MOTION_LAYOUT_VERSION} × {MOTION_FEATURE_DIM}"),
         )?;
         expect(
-            "music layout",
-            format!("v{} × {}", meta.music_layout_version, meta.music_dim),
-            format!("v{FEATURE_LAYOUT_VERSION} × {FEATURE_DIM}"),
-        )?;
-        expect(
             "rig joint count",
             meta.joint_count.to_string(),
             JOINT_COUNT.to_string(),
@@ -369,6 +364,12 @@ impl NeuralModel {
                 },
             );
         }
+        crate::neural::music_layout::upgrade(
+            &mut tensors,
+            meta.music_layout_version,
+            meta.music_dim,
+        )
+        .map_err(ModelFileError::Mismatch)?;
         let mut model = NeuralModel {
             config: meta.config,
             tensors,

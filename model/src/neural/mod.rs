@@ -12,6 +12,7 @@ pub mod config;
 pub mod dancer;
 pub mod file;
 pub mod lu;
+pub mod music_layout;
 pub mod rng;
 pub mod runtime;
 pub mod safety;

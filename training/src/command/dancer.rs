@@ -332,11 +332,13 @@ pub(crate) fn on_default_rig(mut dances: Vec<BuiltDance>) -> Vec<BuiltDance> {
 }
 
 /// Prints how much of the training data the quiet passages cover and what they changed: the
-/// energy heard and the joint speed inside them against the rest of their dances.
+/// energy heard (absolute and below the recent peak) and the joint speed inside them against the
+/// rest of their dances.
 fn report_quiet_passages(dances: &[BuiltDance]) {
     use dsp::feature::FeatureLayout;
     let (mut passages, mut quiet_frames, mut frames) = (0, 0, 0);
     let mut energy = [0.0f64; 2];
+    let mut relative = [0.0f64; 2];
     let mut speed = [0.0f64; 2];
     let mut counts = [0usize; 2];
     let skeleton = model::rig::Skeleton::default_adult();
@@ -354,6 +356,7 @@ fn report_quiet_passages(dances: &[BuiltDance]) {
             let inside = usize::from(d.quiet.iter().any(|&(a, b)| (a..b).contains(&i)));
             quiet_frames += inside;
             energy[inside] += f64::from(d.music[i][FeatureLayout::ENERGY]);
+            relative[inside] += f64::from(d.music[i][FeatureLayout::RELATIVE_LEVEL]);
             let step: f32 = (0..joints)
                 .map(|j| (positions[i * joints + j] - positions[(i - 1) * joints + j]).length())
                 .sum();
@@ -363,10 +366,12 @@ fn report_quiet_passages(dances: &[BuiltDance]) {
     }
     let mean = |v: [f64; 2], k: usize| v[k] / counts[k].max(1) as f64;
     eprintln!(
-        "quiet passages: {passages} over {:.1} % of {frames} training frames; energy heard {:.1} dB inside, {:.1} dB in the rest of their dances; joint speed inside / rest {:.2}",
+        "quiet passages: {passages} over {:.1} % of {frames} training frames; energy heard {:.1} dB inside, {:.1} dB in the rest of their dances (below the recent peak {:.1} and {:.1} dB); joint speed inside / rest {:.2}",
         100.0 * quiet_frames as f64 / frames.max(1) as f64,
         mean(energy, 1),
         mean(energy, 0),
+        mean(relative, 1),
+        mean(relative, 0),
         mean(speed, 1) / mean(speed, 0).max(1e-9)
     );
 }

@@ -1,0 +1,127 @@
+//! Reading models trained on an older music feature layout.
+//!
+//! Layout version 2 appended the relative level (index 83) to version 1's 83 values. A
+//! version-1 model is widened on load with zero weight on the new value (and mean 0, deviation
+//! 1 for it), so it dances exactly as it did: the network cannot see what it never learnt.
+
+use dsp::feature::{FEATURE_DIM, FEATURE_DIM_V1, FEATURE_LAYOUT_VERSION};
+
+use crate::neural::tensors::{NamedTensors, SEED_MUSIC};
+use crate::neural::token::MUSIC_AT;
+
+/// Widens the tensors of a model trained on music layout `version` (`dim` values a frame) to
+/// the current layout; Err names what does not fit.
+pub fn upgrade(tensors: &mut NamedTensors, version: u32, dim: usize) -> Result<(), String> {
+    if version == FEATURE_LAYOUT_VERSION && dim == FEATURE_DIM {
+        return Ok(());
+    }
+    if version != 1 || dim != FEATURE_DIM_V1 {
+        return Err(format!(
+            "music layout is v{version} × {dim}, this build reads v1 × {FEATURE_DIM_V1} and v{FEATURE_LAYOUT_VERSION} × {FEATURE_DIM}"
+        ));
+    }
+    let added = FEATURE_DIM - FEATURE_DIM_V1;
+    for (name, t) in tensors.map.iter_mut() {
+        match (name.as_str(), t.shape.as_slice()) {
+            ("embed.w", &[_, width]) => {
+                // The token's rows: the new music value's sits after version 1's music.
+                let at = (MUSIC_AT + FEATURE_DIM_V1) * width;
+                t.data
+                    .splice(at..at, std::iter::repeat_n(0.0, added * width));
+                t.shape[0] += added;
+            }
+            ("norm.music_mean" | "norm.music_std", &[n]) if n == FEATURE_DIM_V1 => {
+                let fill = if name == "norm.music_std" { 1.0 } else { 0.0 };
+                t.data.extend(std::iter::repeat_n(fill, added));
+                t.shape[0] = FEATURE_DIM;
+            }
+            (n, &[_, FEATURE_DIM_V1]) if n.starts_with(SEED_MUSIC) => {
+                let mut wide = Vec::with_capacity(t.shape[0] * FEATURE_DIM);
+                for row in t.data.chunks_exact(FEATURE_DIM_V1) {
+                    wide.extend_from_slice(row);
+                    wide.extend(std::iter::repeat_n(0.0, added));
+                }
+                t.data = wide;
+                t.shape[1] = FEATURE_DIM;
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::neural::file::NeuralModel;
+    use crate::neural::runtime::Runtime;
+    use crate::neural::token::TOKEN_DIM;
+    use dsp::feature::FeatureLayout;
+
+    fn shipped() -> Option<NeuralModel> {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/default.dnn");
+        NeuralModel::load(&path).ok()
+    }
+
+    #[test]
+    fn a_version_1_model_is_widened_and_deaf_to_the_new_value() {
+        // The shipped model was trained on layout 1: it has no weight on the relative level.
+        let model = shipped().expect("the shipped model loads");
+        assert_eq!(model.tensors.map["embed.w"].shape[0], TOKEN_DIM);
+        let norm = model.normalizer().expect("normalizer");
+        assert_eq!(norm.music_mean.len(), FEATURE_DIM);
+        assert_eq!(norm.music_std[FeatureLayout::RELATIVE_LEVEL], 1.0);
+        let (_, seed_music) = model.seed_clip().expect("seed clip");
+        assert_eq!(seed_music.len(), model.config.window * FEATURE_DIM);
+        let mut tokens = vec![0.0f32; TOKEN_DIM];
+        for (i, v) in tokens.iter_mut().enumerate() {
+            *v = ((i * 37 % 11) as f32 - 5.0) * 0.1;
+        }
+        let context = |level: f32| {
+            let mut rt = Runtime::new(&model.tensors, &model.config).expect("runtime");
+            let mut t = tokens.clone();
+            t[MUSIC_AT + FeatureLayout::RELATIVE_LEVEL] = level;
+            rt.push(&t).to_vec()
+        };
+        assert_eq!(context(0.0), context(-3.0));
+    }
+
+    #[test]
+    fn an_unknown_layout_is_refused() {
+        let mut t = NamedTensors::default();
+        assert!(upgrade(&mut t, 1, 80).is_err());
+        assert!(upgrade(&mut t, 3, FEATURE_DIM).is_err());
+        assert!(upgrade(&mut t, FEATURE_LAYOUT_VERSION, FEATURE_DIM).is_ok());
+    }
+
+    #[test]
+    fn widening_inserts_the_new_row_after_the_old_music() {
+        let width = 2;
+        let v1_rows = TOKEN_DIM - 1;
+        let mut t = NamedTensors::default();
+        let embed: Vec<f32> = (0..v1_rows * width).map(|i| i as f32 + 1.0).collect();
+        t.insert("embed.w", &[v1_rows, width], embed.clone());
+        t.insert(
+            SEED_MUSIC,
+            &[2, FEATURE_DIM_V1],
+            vec![7.0; 2 * FEATURE_DIM_V1],
+        );
+        t.insert(
+            "norm.music_std",
+            &[FEATURE_DIM_V1],
+            vec![3.0; FEATURE_DIM_V1],
+        );
+        upgrade(&mut t, 1, FEATURE_DIM_V1).expect("upgrade");
+        let w = t.get("embed.w", &[TOKEN_DIM, width]).expect("embed");
+        let new_row = MUSIC_AT + FEATURE_DIM_V1;
+        assert_eq!(&w[..new_row * width], &embed[..new_row * width]);
+        assert_eq!(&w[new_row * width..(new_row + 1) * width], &[0.0, 0.0]);
+        assert_eq!(&w[(new_row + 1) * width..], &embed[new_row * width..]);
+        let seed = t.get(SEED_MUSIC, &[2, FEATURE_DIM]).expect("seed");
+        assert_eq!(seed[FEATURE_DIM_V1], 0.0);
+        assert_eq!(seed[FEATURE_DIM], 7.0);
+        let std = t.get("norm.music_std", &[FEATURE_DIM]).expect("std");
+        assert_eq!(std[FEATURE_DIM_V1], 1.0);
+    }
+}
