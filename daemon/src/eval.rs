@@ -73,6 +73,12 @@ pub struct EvalRow {
     pub freezes: usize,
     /// Foot skating, m/s while in contact.
     pub foot_skate_mps: f64,
+    /// Joint speed in the songs' quiet phrases over that elsewhere ([`QUIET_PHRASE_DB`]; mean
+    /// over the dances with a second of them): the ground truth's row says whether the
+    /// captured dancers calm down when their music does.
+    pub quiet_phrase_speed_ratio: f64,
+    /// Dances with a quiet phrase.
+    pub quiet_phrase_dances: usize,
     /// Seconds of motion scored.
     pub seconds: f64,
 }
@@ -322,7 +328,12 @@ impl EvalSet {
                 },
             )?;
             row.foot_skate_mps += s.mean_speed_mps / n as f64;
+            if let Some(r) = quiet_phrase_ratio(&positions[i], &dance.music) {
+                row.quiet_phrase_speed_ratio += r;
+                row.quiet_phrase_dances += 1;
+            }
         }
+        row.quiet_phrase_speed_ratio /= row.quiet_phrase_dances.max(1) as f64;
         let root = Joint::Hips.index();
         row.fpd = fpd(&train, &tracks, root)?;
         row.fmd = fmd(&train, &tracks, root)?;
@@ -699,24 +710,45 @@ fn window_speed(track: &[glam::Vec3], from: usize, to: usize) -> f64 {
 /// Mean joint speed (m/s) of a joint `track` at 25 fps (as [`Skeleton::trajectory`] lays it
 /// out) in frames inside `spans` (seconds) and outside them, skipping the first 2 s.
 pub fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64, f64) {
-    let fps = TANG_FPS;
+    let (inside, outside) = speed_split(track, |f| {
+        let t = f as f64 / TANG_FPS;
+        spans.iter().any(|&(a, b)| (a..b).contains(&t))
+    });
+    (inside.0, outside.0)
+}
+
+/// The mean joint speed of `track` (m/s) and its frame count where `inside(frame)` holds and
+/// where it does not, skipping the first 2 s (the dancer settling in).
+fn speed_split(
+    track: &[glam::Vec3],
+    inside: impl Fn(usize) -> bool,
+) -> ((f64, usize), (f64, usize)) {
     let frames = track.len() / JOINT_COUNT;
-    let (mut inside, mut outside) = ((0.0, 0usize), (0.0, 0usize));
-    for f in (2.0 * fps) as usize..frames {
-        let t = f as f64 / fps;
-        let speed = joint_speed(track, f);
-        let acc = if spans.iter().any(|&(a, b)| (a..b).contains(&t)) {
-            &mut inside
-        } else {
-            &mut outside
-        };
-        acc.0 += speed;
+    let (mut yes, mut no) = ((0.0, 0usize), (0.0, 0usize));
+    for f in (2.0 * TANG_FPS) as usize..frames {
+        let acc = if inside(f) { &mut yes } else { &mut no };
+        acc.0 += joint_speed(track, f);
         acc.1 += 1;
     }
-    (
-        inside.0 / inside.1.max(1) as f64,
-        outside.0 / outside.1.max(1) as f64,
-    )
+    let mean = |(sum, n): (f64, usize)| (sum / n.max(1) as f64, n);
+    (mean(yes), mean(no))
+}
+
+/// How far below its recent peak ([`dsp::LevelFollower`]) the music must sit for a frame to
+/// count as a quiet phrase, dB: the synth songs' quiet sections sit 8–25 dB below.
+pub const QUIET_PHRASE_DB: f32 = 8.0;
+
+/// Joint speed where the music heard sits [`QUIET_PHRASE_DB`] or more below its recent peak
+/// over that elsewhere; None with less than a second of such frames.
+fn quiet_phrase_ratio(
+    track: &[glam::Vec3],
+    music: &[[f32; dsp::feature::FEATURE_DIM]],
+) -> Option<f64> {
+    let level = dsp::FeatureLayout::RELATIVE_LEVEL;
+    let ((quiet, frames), (rest, _)) = speed_split(track, |f| {
+        music.get(f).is_some_and(|m| m[level] <= -QUIET_PHRASE_DB)
+    });
+    (frames as f64 >= TANG_FPS && rest > 0.0).then(|| quiet / rest)
 }
 
 impl MusicSet {
@@ -884,12 +916,13 @@ pub fn style_table_of(system: &str, rows: &str, confusion: &[[usize; 4]; 4]) -> 
 
 /// The table `danced eval` prints.
 pub fn table(rows: &[EvalRow]) -> String {
-    let mut s = String::from(
-        "| system | BeatAlign ↑ | vs other songs | on − half-beat-shifted ↑ | beat offset s ↓ | FPD ↓ | FMD ↓ | FID_k ↓ | Dist_k | freezes | foot skate m/s ↓ |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    let mut s = format!(
+        "| system | BeatAlign ↑ | vs other songs | on − half-beat-shifted ↑ | beat offset s ↓ | FPD ↓ | FMD ↓ | FID_k ↓ | Dist_k | freezes | foot skate m/s ↓ | speed ≥ {QUIET_PHRASE_DB} dB below the recent peak / rest ({} dances) |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        rows.first().map_or(0, |r| r.quiet_phrase_dances)
     );
     for r in rows {
         s += &format!(
-            "| {} | {:.3} | {:.3} | {:+.3} | {:.3} | {:.2} | {:.2} | {:.1} | {:.2} | {} | {:.3} |\n",
+            "| {} | {:.3} | {:.3} | {:+.3} | {:.3} | {:.2} | {:.2} | {:.1} | {:.2} | {} | {:.3} | {:.2} |\n",
             r.system,
             r.beat_align,
             r.beat_align_other,
@@ -900,7 +933,8 @@ pub fn table(rows: &[EvalRow]) -> String {
             r.fid_k,
             r.dist_k,
             r.freezes,
-            r.foot_skate_mps
+            r.foot_skate_mps,
+            r.quiet_phrase_speed_ratio
         );
     }
     s
