@@ -1,8 +1,10 @@
 //! Quiet passages written into training dances (issue 21's dynamics): a few bars of the song
 //! turned down and darkened, and the paired motion slowed to half time there.
 //!
-//! tang2018 has no breakdowns: its songs play at one level throughout, so a network trained on
-//! it cannot learn to calm down when the music does. A passage takes whole bars; the audio is
+//! tang2018 teaches no calm: its songs do fall quiet (up to 29 % of a song sits 8 dB below its
+//! recent peak), but the captured dancers keep their pace there (1.12–1.15 of it elsewhere, as
+//! `danced eval` measures), so a network trained on it cannot learn to calm down when the music
+//! does. A passage takes whole bars; the audio is
 //! attenuated and low-passed (the drums' attacks fade, as in a breakdown) before the *streaming*
 //! analysis hears it, so the features are what live would deliver; the motion runs at about
 //! half pace there and falls behind its song by exactly half the passage's bars, so after it
