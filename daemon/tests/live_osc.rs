@@ -224,6 +224,18 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
         assert!(d < 0.07, "beat at {b:.3} s is {d:.3} s from a click");
     }
 
+    // The level below the recent peak, about 8 times a second, in its range.
+    let levels: Vec<f32> = events
+        .iter()
+        .filter(|m| m.addr == "/danced/relative_level")
+        .map(|m| floats(m)[0])
+        .collect();
+    assert!(levels.len() >= 40, "{} relative levels", levels.len());
+    assert!(
+        levels.iter().all(|l| (-60.0..=0.0).contains(l)),
+        "{levels:?}"
+    );
+
     // The key pose is reached at a beat, soon after it was asked. The model hits it on the model
     // frame nearest the predicted beat (half a model frame off at most) and the sender shows the
     // closest 60 Hz frame (one output frame, `speed` / 60 s of audio, off at most).

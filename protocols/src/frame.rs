@@ -92,4 +92,12 @@ pub enum AnalysisEvent {
         /// Level in dB (full scale).
         db: f32,
     },
+    /// How far the music sits below its own recent loudest (`dsp::LevelFollower`): 0 dB in
+    /// steady music, the drop's depth in a breakdown, whatever the mastering.
+    RelativeLevel {
+        /// Audio stream time, seconds.
+        time_s: f64,
+        /// Level below the recent peak in dB (≤ 0).
+        db: f32,
+    },
 }

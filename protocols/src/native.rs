@@ -178,6 +178,10 @@ impl NativeEncoder {
                 let args = [self.checked(db)];
                 self.write_floats(buf, "/energy", &args);
             }
+            AnalysisEvent::RelativeLevel { db, .. } => {
+                let args = [self.checked(db)];
+                self.write_floats(buf, "/relative_level", &args);
+            }
         }
     }
 
@@ -494,6 +498,14 @@ mod tests {
                 },
                 "/danced/energy",
                 floats(&[-12.0]),
+            ),
+            (
+                AnalysisEvent::RelativeLevel {
+                    time_s: 0.0,
+                    db: -9.5,
+                },
+                "/danced/relative_level",
+                floats(&[-9.5]),
             ),
         ];
         for (event, addr, args) in cases {

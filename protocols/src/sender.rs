@@ -228,6 +228,10 @@ impl OscOutput {
                 time_s: 0.0,
                 db: -120.0,
             },
+            AnalysisEvent::RelativeLevel {
+                time_s: 0.0,
+                db: -60.0,
+            },
         ];
         for e in &events {
             self.pool.clear();

@@ -110,7 +110,7 @@ fn frame(i: u64) -> BodyFrame {
     }
 }
 
-fn events(i: u64) -> [AnalysisEvent; 5] {
+fn events(i: u64) -> [AnalysisEvent; 6] {
     let t = i as f64 / 60.0;
     let mut chroma = [0.0; 12];
     chroma[(i % 12) as usize] = 1.0;
@@ -134,6 +134,10 @@ fn events(i: u64) -> [AnalysisEvent; 5] {
         AnalysisEvent::Energy {
             time_s: t,
             db: -12.0,
+        },
+        AnalysisEvent::RelativeLevel {
+            time_s: t,
+            db: -9.0,
         },
     ]
 }
@@ -223,7 +227,7 @@ fn warm_sender_allocates_nothing_for_any_layout() {
     );
     assert_eq!(total_calls, 0, "the warm sender allocated");
 
-    // Everything went out and arrived, nothing was lost or altered: native 1 bundle + 5 events
+    // Everything went out and arrived, nothing was lost or altered: native 1 bundle + 6 events
     // (none in the warm-up), VMC whole 1 bundle, VRChat 8 trackers + head × 2 messages, VMC
     // split more than one bundle.
     for out in [&whole, &split] {
@@ -235,7 +239,7 @@ fn warm_sender_allocates_nothing_for_any_layout() {
         );
     }
     let n = FRAMES as usize + 1;
-    assert_eq!(received[0], n + 5 * FRAMES as usize);
+    assert_eq!(received[0], n + 6 * FRAMES as usize);
     assert_eq!(received[1], n);
     assert_eq!(received[2], n * 18);
     assert!(received[3] >= n * 2, "{} split bundles", received[3]);

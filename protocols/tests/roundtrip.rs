@@ -151,6 +151,7 @@ proptest! {
             AnalysisEvent::Tempo { bpm: x, confidence: y },
             AnalysisEvent::Chroma { time_s: t, chroma },
             AnalysisEvent::Energy { time_s: t, db: y },
+            AnalysisEvent::RelativeLevel { time_s: t, db: y },
         ];
         for e in &events {
             let msgs = decode(enc.encode_event(e));

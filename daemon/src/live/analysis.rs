@@ -33,6 +33,8 @@ const SILENCE_SAMPLES: usize = SILENCE_BLOCK * 32;
 const DEFAULT_RATE: u32 = 48_000;
 /// Hops between Tempo/Energy/Chroma events (86 hops/s → ~9.6 Hz).
 const SLOW_EVENT_HOPS: u64 = 9;
+/// Feature frames between RelativeLevel events (at 25–30 frames/s → 8–10 Hz, as Energy).
+const LEVEL_EVENT_FRAMES: u64 = 3;
 
 /// Settings of the analysis thread.
 #[derive(Clone, Copy, Debug)]
@@ -110,6 +112,12 @@ impl AnalysisSink for Out<'_> {
     }
 
     fn feature(&mut self, frame: &FeatureFrame) {
+        if frame.index.is_multiple_of(LEVEL_EVENT_FRAMES) {
+            self.event(AnalysisEvent::RelativeLevel {
+                time_s: self.base_time_s + frame.time_s,
+                db: frame.values[dsp::FeatureLayout::RELATIVE_LEVEL],
+            });
+        }
         let mut frame = *frame;
         frame.time_s += self.base_time_s;
         frame.decided_at_s += self.base_time_s;
