@@ -1017,6 +1017,35 @@ mod tests {
     }
 
     #[test]
+    fn quiet_phrases_are_where_the_music_sits_8_db_below_its_peak() {
+        // 200 frames moving 4 cm a frame, except 2 cm a frame over frames 100..150, where the
+        // music sits 10 dB below its peak (and 7 dB below over 150..200: not quiet enough).
+        let step = |f: usize| if (100..150).contains(&f) { 0.02 } else { 0.04 };
+        let mut x = 0.0f32;
+        let track: Vec<glam::Vec3> = (0..200usize)
+            .flat_map(|f| {
+                x += step(f);
+                (0..JOINT_COUNT).map(move |j| glam::Vec3::new(x, j as f32 * 0.1, 0.0))
+            })
+            .collect();
+        let mut music = vec![[0.0f32; dsp::feature::FEATURE_DIM]; 200];
+        for (f, m) in music.iter_mut().enumerate() {
+            m[dsp::FeatureLayout::RELATIVE_LEVEL] = match f {
+                100..150 => -10.0,
+                150.. => -7.0,
+                _ => 0.0,
+            };
+        }
+        let ratio = quiet_phrase_ratio(&track, &music).expect("2 s of quiet phrase");
+        assert!((ratio - 0.5).abs() < 1e-5, "{ratio}");
+        // Less than a second of it gives no ratio.
+        for m in &mut music[124..150] {
+            m[dsp::FeatureLayout::RELATIVE_LEVEL] = 0.0;
+        }
+        assert_eq!(quiet_phrase_ratio(&track, &music), None);
+    }
+
+    #[test]
     fn styles_come_from_the_dance_names() {
         assert_eq!(style_of("DANCE_C_2"), Some(0));
         assert_eq!(style_of("DANCE_W_31"), Some(3));
