@@ -717,6 +717,14 @@ pub fn speed_inside_and_out(track: &[glam::Vec3], spans: &[(f64, f64)]) -> (f64,
     (inside.0, outside.0)
 }
 
+/// The mean joint speed of `track` (m/s) within `span` (seconds) as [`speed_split`] counts
+/// it; None where no frame is scored there (an intro within the first 2 s).
+fn speed_within(track: &[glam::Vec3], span: (f64, f64)) -> Option<f64> {
+    let ((speed, frames), _) =
+        speed_split(track, |f| (span.0..span.1).contains(&(f as f64 / TANG_FPS)));
+    (frames > 0).then_some(speed)
+}
+
 /// The mean joint speed of `track` (m/s) and its frame count where `inside(frame)` holds and
 /// where it does not, skipping the first 2 s (the dancer settling in).
 fn speed_split(
@@ -825,14 +833,12 @@ impl MusicSet {
             if !parts.is_empty() && rest > 0.0 {
                 row.quiet_speed_ratio += quiet / rest;
                 row.quiet_songs += 1;
-                // Within the first 2 s (left out) an intro may have no frame: no ratio then.
-                let within = |span: (f64, f64)| speed_inside_and_out(&p, &[span]).0;
-                if let Some(s) = song.section {
-                    row.section_speed_ratio += within(s) / rest;
+                if let Some(speed) = song.section.and_then(|s| speed_within(&p, s)) {
+                    row.section_speed_ratio += speed / rest;
                     row.section_songs += 1;
                 }
-                if let Some(s) = song.intro.filter(|s| s.1 > 2.0) {
-                    row.intro_speed_ratio += within(s) / rest;
+                if let Some(speed) = song.intro.and_then(|s| speed_within(&p, s)) {
+                    row.intro_speed_ratio += speed / rest;
                     row.intro_songs += 1;
                 }
             }
