@@ -692,11 +692,7 @@ pub struct MusicRow {
 /// The mean speed of the joints of `track` (positions, [`JOINT_COUNT`] a frame) from frame
 /// `f − 1` to frame `f`, m/s.
 fn joint_speed(track: &[glam::Vec3], f: usize) -> f64 {
-    (0..JOINT_COUNT)
-        .map(|j| f64::from(track[f * JOINT_COUNT + j].distance(track[(f - 1) * JOINT_COUNT + j])))
-        .sum::<f64>()
-        * TANG_FPS
-        / JOINT_COUNT as f64
+    model::rig::Skeleton::mean_joint_step(track, f) * TANG_FPS
 }
 
 /// The mean joint speed of `track` over frames `from + 1 .. to` (each against the one before),

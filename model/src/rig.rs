@@ -414,6 +414,16 @@ impl Skeleton {
         out
     }
 
+    /// The mean distance the joints of a [`Skeleton::trajectory`] travel from frame `f − 1`
+    /// to frame `f` (`f` ≥ 1), in metres: the dance metrics' joint speed, per frame.
+    pub fn mean_joint_step(track: &[Vec3], f: usize) -> f64 {
+        let (now, before) = (&track[f * JOINT_COUNT..], &track[(f - 1) * JOINT_COUNT..]);
+        (0..JOINT_COUNT)
+            .map(|j| f64::from(now[j].distance(before[j])))
+            .sum::<f64>()
+            / JOINT_COUNT as f64
+    }
+
     /// World positions and rotations of every joint in one pass.
     pub fn forward_kinematics(
         &self,
@@ -488,6 +498,16 @@ mod tests {
     use std::f32::consts::FRAC_PI_2;
 
     const EPS: f32 = 1e-5;
+
+    #[test]
+    fn the_mean_joint_step_is_how_far_the_joints_travel_on_average() {
+        let mut track = vec![Vec3::ZERO; 2 * JOINT_COUNT];
+        // One joint 0.3 m, one 0.1 m further: the mean of 22 joints, the others still.
+        track[JOINT_COUNT] = Vec3::new(0.3, 0.0, 0.0);
+        track[JOINT_COUNT + 5] = Vec3::new(0.0, 0.0, -0.1);
+        let step = Skeleton::mean_joint_step(&track, 1);
+        assert!((step - 0.4 / JOINT_COUNT as f64).abs() < 1e-7, "{step}");
+    }
 
     fn close(a: Vec3, b: Vec3, eps: f32) -> bool {
         (a - b).abs().max_element() <= eps

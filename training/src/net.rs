@@ -12,8 +12,8 @@ use model::motion::{MOTION_FEATURE_DIM, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::tensors::{NamedTensors, WeightError};
 use model::neural::token::{
-    FLAG_AT, FTG_AT, KEY_AT, KEY_CONDITION_CLAMP, KEY_CONDITION_DIM, KEY_ROT_DIM, MUSIC_AT,
-    POSE_AT, TOKEN_DIM,
+    FLAG_AT, FTG_AT, KEY_AT, KEY_CONDITION_CLAMP, KEY_CONDITION_DIM, KEY_ROT_DIM, LEVEL_AT,
+    MUSIC_AT, POSE_AT, TOKEN_DIM,
 };
 
 /// Horizons of the auxiliary heads, frames (0.2, 0.4 and 1 s at 25 fps): the context must
@@ -168,6 +168,10 @@ pub enum InputPath {
     Key,
     /// The music features: the embedding's rows for them.
     Music,
+    /// The relative level alone (`dsp::feature::FeatureLayout::RELATIVE_LEVEL`): its one
+    /// embedding row. Steady music reads near 0 dB, so the frames this row changes most are
+    /// those quieter than the song's recent peak.
+    RelativeLevel,
 }
 
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
@@ -185,6 +189,9 @@ pub struct Net {
     /// Whether the flow also reads each token's key conditioning (`NetConfig::key_to_flow`).
     #[module(skip)]
     pub key_to_flow: bool,
+    /// Whether the flow also reads each token's relative level (`NetConfig::level_to_flow`).
+    #[module(skip)]
+    pub level_to_flow: bool,
 }
 
 /// What one forward pass scores: the flow's NLL of the next pose per row `[b·s]`, and the
@@ -233,42 +240,72 @@ impl Net {
             flow: Flow::load(t, "flow", &c.flow(), device)?,
             aux,
             key_to_flow: c.key_to_flow,
+            level_to_flow: c.level_to_flow,
         })
     }
 
     /// What the flow is conditioned on, `[b·s, flow context]`: the transformer's context
-    /// `[b·s, d_model]`, and for a `key_to_flow` network each token's key conditioning as
-    /// `model::neural::token::key_condition` computes it live.
+    /// `[b·s, d_model]`, for a `key_to_flow` network each token's key conditioning as
+    /// `model::neural::token::key_condition` computes it live, and for a `level_to_flow` one
+    /// each token's relative level.
     pub fn flow_context(&self, ctx: Tensor<2>, tokens: Tensor<3>) -> Tensor<2> {
-        if !self.key_to_flow {
+        if !self.key_to_flow && !self.level_to_flow {
             return ctx;
         }
         let [b, s, _] = tokens.dims();
         let flat = tokens.reshape([b * s, TOKEN_DIM]);
-        let flag = flat.clone().narrow(1, FLAG_AT, 1);
-        let key = flat.clone().narrow(1, KEY_AT, KEY_ROT_DIM);
-        let pose = flat.clone().narrow(1, POSE_AT + ROTATIONS, KEY_ROT_DIM);
-        let distance = ((key - pose) * flag).clamp(-KEY_CONDITION_CLAMP, KEY_CONDITION_CLAMP);
-        let rest = flat.narrow(1, FTG_AT, KEY_CONDITION_DIM - KEY_ROT_DIM);
-        Tensor::cat(vec![ctx, distance, rest], 1)
+        let mut parts = vec![ctx];
+        if self.key_to_flow {
+            let flag = flat.clone().narrow(1, FLAG_AT, 1);
+            let key = flat.clone().narrow(1, KEY_AT, KEY_ROT_DIM);
+            let pose = flat.clone().narrow(1, POSE_AT + ROTATIONS, KEY_ROT_DIM);
+            parts.push(((key - pose) * flag).clamp(-KEY_CONDITION_CLAMP, KEY_CONDITION_CLAMP));
+            parts.push(
+                flat.clone()
+                    .narrow(1, FTG_AT, KEY_CONDITION_DIM - KEY_ROT_DIM),
+            );
+        }
+        if self.level_to_flow {
+            parts.push(flat.narrow(1, LEVEL_AT, 1));
+        }
+        Tensor::cat(parts, 1)
     }
 
     /// The weights that read `path`'s inputs and nothing else.
     pub fn path_rows(&self, path: InputPath) -> Vec<WeightRows> {
-        if path == InputPath::Music {
-            return vec![self.transformer.embedding_rows(MUSIC_AT..KEY_AT)];
-        }
-        let mut rows = vec![self.transformer.embedding_rows(KEY_AT..TOKEN_DIM)];
-        if self.key_to_flow {
-            for step in &self.flow.steps {
-                let inputs = step.c1.w.val().dims()[0];
-                rows.push(WeightRows {
-                    param: step.c1.w.id,
-                    rows: inputs - KEY_CONDITION_DIM..inputs,
-                });
+        let c = self.transformer.config();
+        // A coupling's first layer reads [half the pose, the flow's context].
+        let flow_rows = |at: usize, width: usize| -> Vec<WeightRows> {
+            self.flow
+                .steps
+                .iter()
+                .map(|step| {
+                    let inputs = step.c1.w.val().dims()[0];
+                    let context_at = inputs - c.flow().context;
+                    WeightRows {
+                        param: step.c1.w.id,
+                        rows: context_at + at..context_at + at + width,
+                    }
+                })
+                .collect()
+        };
+        match path {
+            InputPath::Music => vec![self.transformer.embedding_rows(MUSIC_AT..KEY_AT)],
+            InputPath::RelativeLevel => {
+                let mut rows = vec![self.transformer.embedding_rows(LEVEL_AT..LEVEL_AT + 1)];
+                if self.level_to_flow {
+                    rows.extend(flow_rows(c.level_condition_at(), 1));
+                }
+                rows
+            }
+            InputPath::Key => {
+                let mut rows = vec![self.transformer.embedding_rows(KEY_AT..TOKEN_DIM)];
+                if self.key_to_flow {
+                    rows.extend(flow_rows(c.key_condition_at(), KEY_CONDITION_DIM));
+                }
+                rows
             }
         }
-        rows
     }
 
     /// Writes the trainable weights into `t` (normalisation and seed entries are left as they
@@ -620,6 +657,7 @@ impl Net {
             flow,
             aux: self.aux,
             key_to_flow: self.key_to_flow,
+            level_to_flow: self.level_to_flow,
         }
     }
 }
@@ -700,6 +738,16 @@ mod tests {
     fn streaming_matches_the_batched_network_with_the_key_in_the_flow() {
         let c = NetConfig {
             key_to_flow: true,
+            ..NetConfig::tiny()
+        };
+        streaming_matches_batched(c);
+    }
+
+    #[test]
+    fn streaming_matches_the_batched_network_with_the_level_in_the_flow() {
+        let c = NetConfig {
+            key_to_flow: true,
+            level_to_flow: true,
             ..NetConfig::tiny()
         };
         streaming_matches_batched(c);

@@ -102,24 +102,46 @@ pub struct Corpus {
 /// transformer, the flow's new inputs weighted zero: it dances exactly as before until
 /// training moves them (a key-pose loss then reaches the key by the shortest path).
 pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
-    if model.config.key_to_flow {
+    widen_flow_context(model, |c| c.key_to_flow = true)
+}
+
+/// Rebuilds `model` to read the relative level in its flow (`level_to_flow`), the new input
+/// weighted zero: it dances exactly as before until training moves it.
+pub fn add_level_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
+    widen_flow_context(model, |c| c.level_to_flow = true)
+}
+
+/// Gives `model` the flow inputs `change` adds to its config, as zero rows of each coupling's
+/// first layer where the new config places them in the flow's context.
+fn widen_flow_context(
+    model: &mut NeuralModel,
+    change: impl Fn(&mut NetConfig),
+) -> Result<(), WeightError> {
+    let before = model.config;
+    let mut after = before;
+    change(&mut after);
+    let (old, new) = (before.flow(), after.flow());
+    if new.context == old.context {
+        model.config = after;
         return Ok(());
     }
-    let before = model.config.flow();
-    let mut config = model.config;
-    config.key_to_flow = true;
-    let added = config.flow().context - before.context;
-    let inputs = before.half() + before.context;
-    for k in 0..before.steps {
+    // The one block of the context that differs: where the two layouts first part.
+    let at = if after.key_to_flow != before.key_to_flow {
+        after.key_condition_at()
+    } else {
+        after.level_condition_at()
+    };
+    let added = new.context - old.context;
+    let inputs = old.half() + old.context;
+    for k in 0..old.steps {
         let name = format!("flow.{k}.c1.w");
-        let mut w = model.tensors.get(&name, &[inputs, before.hidden])?.to_vec();
-        // Rows are inputs; the key conditioning follows the context.
-        w.resize((inputs + added) * before.hidden, 0.0);
-        model
-            .tensors
-            .insert(name, &[inputs + added, before.hidden], w);
+        let mut w = model.tensors.get(&name, &[inputs, old.hidden])?.to_vec();
+        // Rows are inputs: [half the pose, the context].
+        let row = (old.half() + at) * old.hidden;
+        w.splice(row..row, std::iter::repeat_n(0.0, added * old.hidden));
+        model.tensors.insert(name, &[inputs + added, old.hidden], w);
     }
-    model.config = config;
+    model.config = after;
     Ok(())
 }
 
@@ -1082,12 +1104,13 @@ mod tests {
         (c, corpus, tr, rng)
     }
 
-    #[test]
-    fn a_network_given_the_key_in_its_flow_dances_as_before_until_trained() {
-        let c = NetConfig {
-            styles: 0,
-            ..NetConfig::tiny()
-        };
+    /// A rebuild of a network's flow inputs ([`add_key_to_flow`], [`add_level_to_flow`]).
+    type Widen = fn(&mut NeuralModel) -> Result<(), WeightError>;
+
+    /// Builds a perturbed tiny network of config `c`, widens its flow with `widen`, and
+    /// checks that the runtime samples every step as before (keys pending from token 5); the
+    /// widened config.
+    fn dances_as_before_widened(c: NetConfig, widen: Widen) -> NetConfig {
         let mut t = init_net(&c, 4);
         t.perturb(6, 0.05);
         let mut model = NeuralModel {
@@ -1096,8 +1119,8 @@ mod tests {
             training: TrainingSummary::default(),
         };
         let mut before = Runtime::new(&model.tensors, &model.config).unwrap();
-        add_key_to_flow(&mut model).unwrap();
-        assert!(model.config.key_to_flow);
+        widen(&mut model).unwrap();
+        assert!(model.config.flow().context > c.flow().context);
         let mut after = Runtime::new(&model.tensors, &model.config).unwrap();
         let mut r = Rng::new(3);
         let (mut a, mut b) = (vec![0.0; P], vec![0.0; P]);
@@ -1113,6 +1136,36 @@ mod tests {
         }
         // The new inputs are trainable weights like the others: the rebuilt network loads.
         assert!(Net::load(&model.tensors, &model.config, &cpu_device()).is_ok());
+        model.config
+    }
+
+    #[test]
+    fn a_network_given_the_key_in_its_flow_dances_as_before_until_trained() {
+        let c = NetConfig {
+            styles: 0,
+            ..NetConfig::tiny()
+        };
+        assert!(dances_as_before_widened(c, add_key_to_flow).key_to_flow);
+    }
+
+    #[test]
+    fn a_network_given_the_relative_level_in_its_flow_dances_as_before_until_trained() {
+        // As the shipped model is widened: its flow already reads the key.
+        let c = NetConfig {
+            styles: 0,
+            key_to_flow: true,
+            ..NetConfig::tiny()
+        };
+        assert!(dances_as_before_widened(c, add_level_to_flow).level_to_flow);
+        // The key inserted before a level the flow already reads: the level's trained
+        // weights stay on the level's input (appended after it, they would read a key input).
+        let c = NetConfig {
+            styles: 0,
+            level_to_flow: true,
+            ..NetConfig::tiny()
+        };
+        let widened = dances_as_before_widened(c, add_key_to_flow);
+        assert!(widened.key_to_flow && widened.level_to_flow);
     }
 
     #[test]
@@ -1350,23 +1403,48 @@ mod tests {
         moved
     }
 
-    #[test]
-    fn trained_on_the_music_path_only_only_the_music_rows_move() {
-        let (_, corpus, mut tr, mut rng) = trained_periodic_trainer(60);
-        let start = tr.model().clone();
-        let mut tr = Trainer::new(start.clone())
-            .unwrap()
-            .training_only(InputPath::Music);
+    /// Trains a periodic dance's network for 30 steps on `path` alone (widened first by
+    /// `widen`): the validation NLL before and after, and the rows that moved by tensor name.
+    /// For the relative level the dance's music also swells and fades with its motion (the
+    /// periodic dance's is steady, so nothing could learn from it).
+    fn trained_only_on(
+        path: InputPath,
+        widen: Option<Widen>,
+    ) -> (f64, f64, Vec<(String, Vec<usize>)>) {
+        let (c, mut corpus, mut tr, mut rng) = trained_periodic_trainer(60);
+        if path == InputPath::RelativeLevel {
+            let (motion, mut music) = periodic_dance();
+            for (i, m) in music.iter_mut().enumerate() {
+                m[dsp::feature::FeatureLayout::RELATIVE_LEVEL] =
+                    6.0 * ((i as f32 * 0.3).sin() - 1.0);
+            }
+            let norm = Normalizer::fit(&motion, &music);
+            corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
+        }
+        let mut start = tr.model().clone();
+        if let Some(widen) = widen {
+            widen(&mut start).unwrap();
+        }
+        let mut tr = Trainer::new(start.clone()).unwrap().training_only(path);
         let val = corpus.all_sequences();
         let before = tr.evaluate(&val).unwrap();
         for _ in 0..30 {
             tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
         }
         let after = tr.evaluate(&val).unwrap();
+        (
+            before,
+            after,
+            moved_rows(&start.tensors, &tr.model().tensors),
+        )
+    }
+
+    #[test]
+    fn trained_on_the_music_path_only_only_the_music_rows_move() {
+        let (before, after, moved) = trained_only_on(InputPath::Music, None);
         // The past already predicts the periodic dance, so the music's rows lower its NLL
         // only a little (20.473 → 20.471 measured), but they do.
         assert!(after < before, "NLL {before} → {after}");
-        let moved = moved_rows(&start.tensors, &tr.model().tensors);
         assert_eq!(moved.len(), 1, "{moved:?}");
         assert_eq!(moved[0].0, "embed.w");
         assert!(
@@ -1376,6 +1454,25 @@ mod tests {
                 .all(|r| (token::MUSIC_AT..token::KEY_AT).contains(r)),
             "{moved:?}"
         );
+        assert!(moved[0].1.len() > 1, "{moved:?}");
+    }
+
+    #[test]
+    fn trained_on_the_relative_level_only_its_rows_move() {
+        let (before, after, moved) = trained_only_on(InputPath::RelativeLevel, None);
+        assert!(after <= before, "NLL {before} → {after}");
+        assert_eq!(moved, vec![("embed.w".to_string(), vec![token::LEVEL_AT])]);
+        // With the level in the flow, each coupling's row for it learns too (the context
+        // follows half the pose; the level follows the transformer's context).
+        let (_, _, moved) = trained_only_on(InputPath::RelativeLevel, Some(add_level_to_flow));
+        let c = NetConfig::tiny();
+        let row = c.flow().half() + c.level_condition_at();
+        let mut want = vec![("embed.w".to_string(), vec![token::LEVEL_AT])];
+        want.extend((0..c.flow_steps).map(|k| (format!("flow.{k}.c1.w"), vec![row])));
+        want.sort();
+        let mut moved = moved;
+        moved.sort();
+        assert_eq!(moved, want);
     }
 
     /// The critic's full term: every frame, no floor, no fade (to measure with at learning

@@ -74,6 +74,11 @@ pub struct NetConfig {
     /// context; false in models before it (they condition on the key through the transformer only).
     #[serde(default)]
     pub key_to_flow: bool,
+    /// The flow also reads each token's relative level ([`crate::neural::token::LEVEL_AT`], the
+    /// music heard below its recent peak) beside the context, after the key conditioning;
+    /// false in models before it.
+    #[serde(default)]
+    pub level_to_flow: bool,
 }
 
 impl Default for NetConfig {
@@ -92,6 +97,7 @@ impl Default for NetConfig {
             flow_hidden: 192,
             styles: crate::style::DanceStyle::COUNT,
             key_to_flow: false,
+            level_to_flow: false,
         }
     }
 }
@@ -110,7 +116,23 @@ impl NetConfig {
             flow_hidden: 16,
             styles: crate::style::DanceStyle::COUNT,
             key_to_flow: false,
+            level_to_flow: false,
         }
+    }
+
+    /// Where the key conditioning starts in the flow's context (after the transformer's).
+    pub fn key_condition_at(&self) -> usize {
+        self.d_model
+    }
+
+    /// Where the relative level sits in the flow's context (after the key conditioning).
+    pub fn level_condition_at(&self) -> usize {
+        self.key_condition_at()
+            + if self.key_to_flow {
+                KEY_CONDITION_DIM
+            } else {
+                0
+            }
     }
 
     /// Size of one attention head.
@@ -122,12 +144,7 @@ impl NetConfig {
     pub fn flow(&self) -> FlowConfig {
         FlowConfig {
             dim: MOTION_FEATURE_DIM,
-            context: self.d_model
-                + if self.key_to_flow {
-                    KEY_CONDITION_DIM
-                } else {
-                    0
-                },
+            context: self.level_condition_at() + usize::from(self.level_to_flow),
             hidden: self.flow_hidden,
             steps: self.flow_steps,
         }

@@ -348,6 +348,8 @@ impl NeuralModel {
             meta.config.lookahead.to_string(),
         )?;
         meta.config.check().map_err(ModelFileError::Mismatch)?;
+        crate::neural::music_layout::readable(meta.music_layout_version, meta.music_dim)
+            .map_err(ModelFileError::Mismatch)?;
         let mut tensors = NamedTensors::default();
         for (name, shape) in &meta.tensors {
             let n: usize = shape.iter().product();

@@ -9,16 +9,23 @@ use dsp::feature::{FEATURE_DIM, FEATURE_DIM_V1, FEATURE_LAYOUT_VERSION};
 use crate::neural::tensors::{NamedTensors, SEED_MUSIC};
 use crate::neural::token::MUSIC_AT;
 
+/// Whether this build reads a model trained on music layout `version` with `dim` features
+/// (its own, or one [`upgrade`] widens), said before any of the file's weights are read.
+pub fn readable(version: u32, dim: usize) -> Result<(), String> {
+    match (version, dim) {
+        (FEATURE_LAYOUT_VERSION, FEATURE_DIM) | (1, FEATURE_DIM_V1) => Ok(()),
+        _ => Err(format!(
+            "music layout is v{version} × {dim}, this build reads v1 × {FEATURE_DIM_V1} and v{FEATURE_LAYOUT_VERSION} × {FEATURE_DIM}"
+        )),
+    }
+}
+
 /// Widens the tensors of a model trained on music layout `version` (`dim` values a frame) to
 /// the current layout; Err names what does not fit.
 pub fn upgrade(tensors: &mut NamedTensors, version: u32, dim: usize) -> Result<(), String> {
+    readable(version, dim)?;
     if version == FEATURE_LAYOUT_VERSION && dim == FEATURE_DIM {
         return Ok(());
-    }
-    if version != 1 || dim != FEATURE_DIM_V1 {
-        return Err(format!(
-            "music layout is v{version} × {dim}, this build reads v1 × {FEATURE_DIM_V1} and v{FEATURE_LAYOUT_VERSION} × {FEATURE_DIM}"
-        ));
     }
     let added = FEATURE_DIM - FEATURE_DIM_V1;
     for (name, t) in tensors.map.iter_mut() {
@@ -93,6 +100,11 @@ mod tests {
         assert!(upgrade(&mut t, 1, 80).is_err());
         assert!(upgrade(&mut t, 3, FEATURE_DIM).is_err());
         assert!(upgrade(&mut t, FEATURE_LAYOUT_VERSION, FEATURE_DIM).is_ok());
+        // The file reader asks before it decodes a single weight.
+        assert!(readable(1, 80).is_err());
+        assert!(readable(3, FEATURE_DIM).is_err());
+        assert!(readable(1, FEATURE_DIM_V1).is_ok());
+        assert!(readable(FEATURE_LAYOUT_VERSION, FEATURE_DIM).is_ok());
     }
 
     #[test]

@@ -7,7 +7,7 @@
 use crate::neural::config::{COUPLING_SCALE_OFFSET, LN_EPS, NetConfig, rope_frequency};
 use crate::neural::lu;
 use crate::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
-use crate::neural::token::{FLAG_AT, key_condition};
+use crate::neural::token::{FLAG_AT, LEVEL_AT, key_condition};
 
 struct Dense {
     w: Vec<f32>,
@@ -218,7 +218,8 @@ impl Runtime {
     }
 
     /// Appends one token (`TOKEN_DIM` values) and returns its context vector (the transformer's;
-    /// a `key_to_flow` network's flow also reads the token's key conditioning).
+    /// a `key_to_flow` network's flow also reads the token's key conditioning, a
+    /// `level_to_flow` one its relative level).
     pub fn push(&mut self, token: &[f32]) -> &[f32] {
         let c = self.config;
         let (d, heads, dh) = (c.d_model, c.heads, c.head_dim());
@@ -302,7 +303,10 @@ impl Runtime {
         self.position += 1;
         self.final_ln.apply(&self.x, &mut self.ctx[..d]);
         if c.key_to_flow {
-            key_condition(token, &mut self.ctx[d..]);
+            key_condition(token, &mut self.ctx[c.key_condition_at()..]);
+        }
+        if c.level_to_flow {
+            self.ctx[c.level_condition_at()] = token[LEVEL_AT];
         }
         &self.ctx[..d]
     }

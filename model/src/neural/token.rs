@@ -26,6 +26,9 @@ pub const FTG_AT: usize = KEY_AT + KEY_ROT_DIM;
 pub const FLAG_AT: usize = FTG_AT + FTG_DIM;
 /// Width of a token.
 pub const TOKEN_DIM: usize = FLAG_AT + 1;
+/// Where a token holds the relative level (the music heard below its recent peak,
+/// normalised), which a `level_to_flow` network's flow reads directly.
+pub const LEVEL_AT: usize = MUSIC_AT + dsp::feature::FeatureLayout::RELATIVE_LEVEL;
 /// Width of the key conditioning a flow reads directly ([`key_condition`]): how far each
 /// rotation feature is from the key pose, the count-down and the flag.
 pub const KEY_CONDITION_DIM: usize = KEY_ROT_DIM + FTG_DIM + 1;

@@ -14,11 +14,12 @@ use model::neural::config::NetConfig;
 use model::neural::file::{NeuralModel, TrainingSummary};
 use model::neural::rng::Rng;
 use model::neural::tensors::init_net;
-use model::neural::token::Normalizer;
+use model::neural::token::{MUSIC_AT, Normalizer, TOKEN_DIM};
 
 use crate::net::{FreeRun, InputPath};
 use crate::train::{
     Batch, Corpus, CriticTerm, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
+    add_level_to_flow,
 };
 use crate::weight_average::WeightAverage;
 
@@ -171,6 +172,12 @@ pub struct TrainArgs {
     /// built without it, the flow's new inputs start at zero weight (the same dancer).
     #[arg(long)]
     pub key_to_flow: bool,
+    /// Build a network whose flow also reads the relative level (the music heard below its
+    /// recent peak) directly, so a quieter passage can scale the next pose's distribution
+    /// without passing through attention. With `--resume` of a network built without it, the
+    /// flow's new input starts at zero weight (the same dancer).
+    #[arg(long)]
+    pub level_to_flow: bool,
     /// Balance the styles in the sampled sequences: a style's share goes as its frames to the
     /// power 1 − this (0: by frames, 25 waltzes to 4 cha-chas; 1: every style equally often).
     #[arg(long, default_value_t = 0.0)]
@@ -334,6 +341,35 @@ pub(crate) fn on_default_rig(mut dances: Vec<BuiltDance>) -> Vec<BuiltDance> {
 /// Prints how much of the training data the quiet passages cover and what they changed: the
 /// energy heard (absolute and below the recent peak) and the joint speed inside them against the
 /// rest of their dances.
+/// Fits the normalisation of the music features whose embedding rows are all zero (a model
+/// widened to a newer feature layout: `model::neural::music_layout::upgrade` gives them mean 0,
+/// std 1) to `music`, and returns their indices. No weight reads such a feature, so its
+/// statistics change nothing the model does until it learns to read it, and then it reads it
+/// on the scale of the other inputs rather than in raw units (dB for the relative level).
+fn refit_unread_music(model: &mut NeuralModel, music: &[[f32; FEATURE_DIM]]) -> Result<Vec<usize>> {
+    let embed = model
+        .tensors
+        .get("embed.w", &[TOKEN_DIM, model.config.d_model])?;
+    let width = model.config.d_model;
+    let unread: Vec<usize> = (0..FEATURE_DIM)
+        .filter(|&i| {
+            let row = (MUSIC_AT + i) * width;
+            embed[row..row + width].iter().all(|&w| w == 0.0)
+        })
+        .collect();
+    if unread.is_empty() || music.is_empty() {
+        return Ok(Vec::new());
+    }
+    let mut norm = model.normalizer()?;
+    let fitted = Normalizer::fit(&[], music);
+    for &i in &unread {
+        norm.music_mean[i] = fitted.music_mean[i];
+        norm.music_std[i] = fitted.music_std[i];
+    }
+    model.set_normalizer(&norm);
+    Ok(unread)
+}
+
 fn report_quiet_passages(dances: &[BuiltDance]) {
     use dsp::feature::FeatureLayout;
     let (mut passages, mut quiet_frames, mut frames) = (0, 0, 0);
@@ -350,17 +386,13 @@ fn report_quiet_passages(dances: &[BuiltDance]) {
         passages += d.quiet.len();
         let mut poses = Vec::new();
         model::motion::decode(&d.motion, model::motion::RootState::ORIGIN, &mut poses);
-        let joints = model::rig::JOINT_COUNT;
         let positions = skeleton.trajectory(&poses);
         for i in 1..d.music.len().min(poses.len()) {
             let inside = usize::from(d.quiet.iter().any(|&(a, b)| (a..b).contains(&i)));
             quiet_frames += inside;
             energy[inside] += f64::from(d.music[i][FeatureLayout::ENERGY]);
             relative[inside] += f64::from(d.music[i][FeatureLayout::RELATIVE_LEVEL]);
-            let step: f32 = (0..joints)
-                .map(|j| (positions[i * joints + j] - positions[(i - 1) * joints + j]).length())
-                .sum();
-            speed[inside] += f64::from(step) / joints as f64;
+            speed[inside] += model::rig::Skeleton::mean_joint_step(&positions, i);
             counts[inside] += 1;
         }
     }
@@ -444,6 +476,27 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     path.display()
                 );
             }
+            if args.level_to_flow && !model.config.level_to_flow {
+                add_level_to_flow(&mut model).with_context(|| {
+                    format!("giving {}'s flow the relative level", path.display())
+                })?;
+                eprintln!(
+                    "{}: its flow now also reads the relative level (new weights zero: the same dancer until trained)",
+                    path.display()
+                );
+            }
+            let music: Vec<_> = train_pairs
+                .iter()
+                .flat_map(|p| p.1.iter().copied())
+                .collect();
+            let refit = refit_unread_music(&mut model, &music)
+                .with_context(|| format!("renormalising {}'s music", path.display()))?;
+            if !refit.is_empty() {
+                eprintln!(
+                    "{}: music features {refit:?} are read by no weight yet; their normalisation is fitted to the training data",
+                    path.display()
+                );
+            }
             (model, false)
         }
         None => {
@@ -456,6 +509,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 config.styles = 0;
             }
             config.key_to_flow = args.key_to_flow;
+            config.level_to_flow = args.level_to_flow;
             let mut m = NeuralModel {
                 config,
                 tensors: init_net(&config, args.seed),
@@ -599,6 +653,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         + if args.no_style { " --no-style" } else { "" }
         + if args.key_to_flow {
             " --key-to-flow"
+        } else {
+            ""
+        }
+        + if args.level_to_flow {
+            " --level-to-flow"
         } else {
             ""
         }
@@ -888,4 +947,48 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dsp::feature::FeatureLayout;
+
+    #[test]
+    fn a_widened_models_unread_music_is_normalised_to_the_data_and_nothing_else() {
+        let config = NetConfig::tiny();
+        let mut model = NeuralModel {
+            config,
+            tensors: init_net(&config, 1),
+            training: TrainingSummary::default(),
+        };
+        model.set_normalizer(&Normalizer::identity());
+        let unread = FeatureLayout::RELATIVE_LEVEL;
+        let width = config.d_model;
+        let embed = model.tensors.map.get_mut("embed.w").unwrap();
+        embed.data[(MUSIC_AT + unread) * width..][..width].fill(0.0);
+        // Half the frames at −3 dB, half at −9: mean −6, std 3.
+        let music: Vec<[f32; FEATURE_DIM]> = (0..100)
+            .map(|i| {
+                let mut row = [10.0; FEATURE_DIM];
+                row[unread] = if i % 2 == 0 { -3.0 } else { -9.0 };
+                row
+            })
+            .collect();
+        assert_eq!(
+            refit_unread_music(&mut model, &music).unwrap(),
+            vec![unread]
+        );
+        let norm = model.normalizer().unwrap();
+        assert!((norm.music_mean[unread] + 6.0).abs() < 1e-4, "{norm:?}");
+        assert!((norm.music_std[unread] - 3.0).abs() < 1e-4, "{norm:?}");
+        // Every feature a weight reads keeps the statistics it was trained with.
+        for i in (0..FEATURE_DIM).filter(|&i| i != unread) {
+            assert_eq!(
+                (norm.music_mean[i], norm.music_std[i]),
+                (0.0, 1.0),
+                "feature {i}"
+            );
+        }
+    }
 }
