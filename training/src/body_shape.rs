@@ -93,6 +93,36 @@ impl BodyShape {
             .reshape([n])
             .mul_scalar(100.0)
     }
+
+    /// Per sequence, the kinetic features `danced eval` compares dances by (fairmotion's, as
+    /// `model::metrics::kinetic` computes them, without its 2-frame window averaging) of the
+    /// body shape over `poses` `[b, n, MOTION_FEATURE_DIM]` (normalised motion features, n ≥ 3,
+    /// `fps` frames a second): per joint the mean squared horizontal and vertical speed
+    /// (m²/s²) and the mean acceleration norm (m/s²), `[b, JOINT_COUNT, 3]`. Relative to the
+    /// hips, so the root's travel is left out.
+    pub fn kinetic(&self, poses: Tensor<3>, fps: f32) -> Tensor<3> {
+        let [b, n, p] = poses.dims();
+        let rotations = poses.reshape([b * n, p]).narrow(1, ROTATIONS, KEY_ROT_DIM);
+        let at = self.positions(rotations).reshape([b, n, JOINT_COUNT, 3]);
+        let velocity = (at.clone().narrow(1, 1, n - 1) - at.narrow(1, 0, n - 1)).mul_scalar(fps);
+        let squared = velocity.clone().powi_scalar(2);
+        let horizontal = (squared.clone().narrow(3, 0, 1) + squared.clone().narrow(3, 2, 1))
+            .mean_dim(1)
+            .reshape([b, JOINT_COUNT, 1]);
+        let vertical = squared
+            .narrow(3, 1, 1)
+            .mean_dim(1)
+            .reshape([b, JOINT_COUNT, 1]);
+        let acceleration = (velocity.clone().narrow(1, 1, n - 2) - velocity.narrow(1, 0, n - 2))
+            .mul_scalar(fps)
+            .powi_scalar(2)
+            .sum_dim(3)
+            .add_scalar(1e-8)
+            .sqrt()
+            .mean_dim(1)
+            .reshape([b, JOINT_COUNT, 1]);
+        Tensor::cat(vec![horizontal, vertical, acceleration], 2)
+    }
 }
 
 /// Rotation matrices `[n, 3, 3]` (columns the images of +X, +Y, +Z) of 6D features `[n, 6]`
@@ -192,6 +222,62 @@ mod tests {
         // A pose is no distance from itself (the epsilon aside).
         let same = values(shape.distance_cm(rows(a.clone(), &device), rows(a, &device)));
         assert!(same.iter().all(|d| *d < 0.02), "{same:?}");
+    }
+
+    #[test]
+    fn the_kinetic_features_are_those_of_the_rigs_joint_positions() {
+        let device = cpu_device();
+        let mut rng = Rng::new(11);
+        let norm = normalizer(&mut rng);
+        let shape = BodyShape::new(&norm, &device);
+        let (frames, fps) = (5, 25.0);
+        let mut poses = Vec::new();
+        let mut at = Vec::new();
+        let mut q = random_rotations(&mut rng);
+        for _ in 0..frames {
+            for r in q.iter_mut() {
+                *r = (Quat::from_rotation_y(0.1 * rng.normal())
+                    * Quat::from_rotation_x(0.1 * rng.normal())
+                    * *r)
+                    .normalize();
+            }
+            let mut pose = vec![0.0; MOTION_FEATURE_DIM];
+            pose[ROTATIONS..ROTATIONS + KEY_ROT_DIM].copy_from_slice(&features(&norm, &q));
+            poses.extend(pose);
+            at.push(body_shape(&q));
+        }
+        let got = values(
+            shape
+                .kinetic(
+                    Tensor::<3>::from_data(
+                        TensorData::new(poses, [1, frames, MOTION_FEATURE_DIM]),
+                        &device,
+                    ),
+                    fps,
+                )
+                .reshape([JOINT_COUNT * 3]),
+        );
+        for j in 0..JOINT_COUNT {
+            let v: Vec<Vec3> = (1..frames)
+                .map(|f| (at[f][j] - at[f - 1][j]) * fps)
+                .collect();
+            let horizontal = v.iter().map(|v| v.x * v.x + v.z * v.z).sum::<f32>() / 4.0;
+            let vertical = v.iter().map(|v| v.y * v.y).sum::<f32>() / 4.0;
+            let accel = (1..4)
+                .map(|f| ((v[f] - v[f - 1]) * fps).length())
+                .sum::<f32>()
+                / 3.0;
+            for (k, e) in [horizontal, vertical, accel].into_iter().enumerate() {
+                let g = got[3 * j + k];
+                assert!(
+                    (g - e).abs() <= 1e-3 * e.max(1.0),
+                    "joint {j} feature {k}: {g} against {e}"
+                );
+            }
+        }
+        // The hips are where the body is measured from: they do not move.
+        assert!(got[..3].iter().all(|v| *v < 1e-3), "{:?}", &got[..3]);
+        assert!(got[3..].iter().any(|v| *v > 0.1), "{got:?}");
     }
 
     #[test]

@@ -722,6 +722,40 @@ pub struct KeyRollout {
     /// unit of `weight` (what `danced eval` scores: a wrist's own turn moves no joint, a
     /// hip's moves all); None: the normalised rotations' distance.
     pub key_cm: Option<f32>,
+    /// Weight of the approach's kinetic mismatch ([`kinetic_mismatch`]) beside the NLL: the
+    /// way to a key must move each joint with the energy the dance had there; 0 adds nothing.
+    pub kinetic: f32,
+}
+
+/// Added to each kinetic feature before its logarithm (m²/s² and m/s²): a joint the dance
+/// barely moves is compared on a scale where 0.1 m/s counts, not on its ratio to stillness.
+const KINETIC_FLOOR: f32 = 0.01;
+
+/// Per sequence and joint `[b, JOINT_COUNT, 3]`, how far the free run's kinetic features
+/// ([`BodyShape::kinetic`]) over its steps stand from the training dance's over the same
+/// frames: the squared log ratio (a joint twice as energetic as the dance costs 0.48). What
+/// `danced eval` compares a transition to free dancing by; the dance's own frames say what
+/// moving to this music looks like whichever key is called. None when the batch's targets
+/// do not reach the run's last step or it has fewer than three.
+pub fn kinetic_mismatch(
+    shape: &BodyShape,
+    run: &FreeRunOutcome,
+    targets: Tensor<3>,
+) -> Option<Tensor<3>> {
+    let [_, w, _] = run.tokens.dims();
+    let steps = run.poses.dims()[1];
+    if targets.dims()[1] < w || steps < 3 {
+        return None;
+    }
+    let fps = model::neural::file::FRAME_RATE as f32;
+    let free = shape.kinetic(run.poses.clone(), fps);
+    let dance = shape
+        .kinetic(targets.narrow(1, w - steps, steps), fps)
+        .detach();
+    Some(
+        (free.add_scalar(KINETIC_FLOOR).log() - dance.add_scalar(KINETIC_FLOOR).log())
+            .powi_scalar(2),
+    )
 }
 
 /// The frozen critic's term of a [`KeyRollout`]: its key-hidden NLL of the free run's poses.
@@ -849,6 +883,9 @@ pub struct StepLoss {
     /// The critic's key-hidden NLL of the rollout's poses (nats per frame), None without a
     /// critic or a scored rollout.
     pub keyless_nll: Option<f32>,
+    /// The rollout's mean kinetic mismatch ([`kinetic_mismatch`]), None without a kinetic
+    /// term or a scored rollout.
+    pub kinetic_mismatch: Option<f32>,
     /// Sequences of a scored rollout that exploded and were left out.
     pub exploded_sequences: usize,
     /// Whether the update was skipped because a gradient was not finite.
@@ -917,6 +954,7 @@ impl Trainer {
             key_error: None,
             key_error_cm: None,
             keyless_nll: None,
+            kinetic_mismatch: None,
             exploded_sequences: 0,
             gradient_not_finite: false,
         };
@@ -964,6 +1002,16 @@ impl Trainer {
                 if let (Some(error), Some(_)) = (error, scored.key_error) {
                     scored.exploded_sequences = outcome.exploded();
                     loss = loss + error.mul_scalar(r.weight);
+                    if let Some(shape) = self.shape.as_ref().filter(|_| r.kinetic > 0.0)
+                        && let Some(mismatch) =
+                            kinetic_mismatch(shape, &outcome, rt.targets.clone())
+                    {
+                        let mean = outcome.kept_mean(mismatch);
+                        scored.kinetic_mismatch = finite(&mean);
+                        if scored.kinetic_mismatch.is_some() {
+                            loss = loss + mean.mul_scalar(r.kinetic);
+                        }
+                    }
                     if let (Some(critic), Some(term)) = (&self.critic, r.critic) {
                         let frames = critic.keyless_nll(&outcome, styles, rt.targets);
                         scored.keyless_nll = values(outcome.kept_mean(frames.clone()))
@@ -1264,6 +1312,7 @@ mod tests {
                 critic: None,
                 noise_seed: 9,
                 key_cm,
+                kinetic: 0.0,
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
             let scored = tr.step(&b, Some(&r), lr, false);
@@ -1275,6 +1324,43 @@ mod tests {
             rollout(3e-3);
         }
         (before, rollout(0.0))
+    }
+
+    #[test]
+    fn kinetic_rollout_steps_move_the_free_run_as_the_dance_moves() {
+        let (c, corpus, mut tr, _) = trained_periodic_trainer(60);
+        let at = c.window - 1;
+        let mut rollout = |lr: f64, kinetic: f32| {
+            // The same sequences and noise every time; the key itself weighs nothing.
+            let r = KeyRollout {
+                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0, 1),
+                run: FreeRun {
+                    at,
+                    horizon: 6,
+                    temperature: 0.5,
+                    backprop_steps: None,
+                    approach: 0,
+                    bounded: false,
+                },
+                weight: 0.0,
+                critic: None,
+                noise_seed: 9,
+                key_cm: None,
+                kinetic,
+            };
+            let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
+            tr.step(&b, Some(&r), lr, false).kinetic_mismatch
+        };
+        // Without the term nothing is measured.
+        assert_eq!(rollout(0.0, 0.0), None);
+        let before = rollout(0.0, 1.0).expect("the free run is scored");
+        for _ in 0..100 {
+            rollout(3e-3, 1.0);
+        }
+        let after = rollout(0.0, 1.0).expect("the free run is scored");
+        // Measured 5.20 → 2.52: the free run's joints come to move with the dance's energy.
+        assert!(before > 1.0, "{before}");
+        assert!(after < 0.6 * before, "kinetic mismatch {before} → {after}");
     }
 
     /// [`periodic_trainer`] after `steps` teacher-forced steps: past the flow's
@@ -1501,6 +1587,7 @@ mod tests {
             critic,
             noise_seed: 9,
             key_cm: None,
+            kinetic: 0.0,
         };
         let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
         tr.step(&b, Some(&r), lr, false)

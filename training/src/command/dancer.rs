@@ -144,6 +144,12 @@ pub struct TrainArgs {
     /// which weighs a wrist's own turn (it moves no joint) as much as the hips' (they move all).
     #[arg(long, value_name = "CM", requires = "key_rollout", value_parser = positive_cm)]
     pub rollout_key_cm: Option<f64>,
+    /// Weight of the key-pose rollouts' kinetic mismatch: how far each joint's mean squared
+    /// horizontal and vertical speed and mean acceleration over the free run (what `danced
+    /// eval`'s FID_k compares) stand from the training dance's over the same frames, as a
+    /// squared log ratio; the approach to a key must move as the dance moved there. 0: off.
+    #[arg(long, default_value_t = 0.0, requires = "key_rollout")]
+    pub rollout_kinetic: f64,
     /// Train only the weights that read these inputs of the resumed model: `key` (the
     /// embedding's and the flow couplings' rows for the key pose, its count-down and flag:
     /// with no key pending the network dances exactly as the resumed model does, so the
@@ -679,6 +685,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     None => String::new(),
                 }
             ) + &option_if_set("--rollout-foreign", args.rollout_foreign)
+                + &option_if_set("--rollout-kinetic", args.rollout_kinetic)
                 + &option_if_set("--rollout-approach", args.rollout_approach as f64)
                 + &if args.rollout_foreign_draws > 1 {
                     format!(" --rollout-foreign-draws {}", args.rollout_foreign_draws)
@@ -751,6 +758,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let mut key_error = f64::NAN;
     let mut key_error_cm = f64::NAN;
     let mut keyless_nll = f64::NAN;
+    let mut kinetic_mismatch = f64::NAN;
     let mut skipped_rollouts = 0u64;
     let mut exploded_sequences = 0u64;
     let mut gradient_skips = 0u64;
@@ -846,6 +854,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                 }),
                 noise_seed: rng.next_u64(),
                 key_cm: args.rollout_key_cm.map(|c| c as f32),
+                kinetic: args.rollout_kinetic as f32,
             }
         });
         let scored = trainer.step(&batch, rollout.as_ref(), lr, !args.no_aux);
@@ -867,6 +876,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         if let Some(e) = scored.keyless_nll {
             keyless_nll = running_mean(keyless_nll, f64::from(e));
         }
+        if let Some(e) = scored.kinetic_mismatch {
+            kinetic_mismatch = running_mean(kinetic_mismatch, f64::from(e));
+        }
         bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
         if bad_steps >= 20 {
             bail!(
@@ -886,7 +898,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             checkpoint(&mut trainer, average.as_ref(), step, last_val, secs)?;
             // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
             let line = format!(
-                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}{}{}",
+                "epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame{}{}{}{}",
                 step / steps_per_epoch,
                 last_val.map_or("-".into(), |v| format!("{v:.2}")),
                 if key_error.is_nan() {
@@ -906,6 +918,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     format!(
                         ", the rollouts' key-hidden NLL under the frozen start {keyless_nll:.2}"
                     )
+                },
+                if kinetic_mismatch.is_nan() {
+                    String::new()
+                } else {
+                    format!(", their kinetic mismatch {kinetic_mismatch:.3}")
                 },
                 if gradient_skips == 0 {
                     String::new()
