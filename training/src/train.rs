@@ -1291,6 +1291,34 @@ mod tests {
         );
     }
 
+    /// The same four sequences' free runs from token `at` to a key 6 frames on, at
+    /// `temperature` with the same noise every time, the key weighing `weight` and the
+    /// kinetic mismatch `kinetic`.
+    fn lesson_rollout(
+        corpus: &Corpus,
+        at: usize,
+        temperature: f32,
+        weight: f32,
+        kinetic: f32,
+    ) -> KeyRollout {
+        KeyRollout {
+            batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0, 1),
+            run: FreeRun {
+                at,
+                horizon: 6,
+                temperature,
+                backprop_steps: None,
+                approach: 0,
+                bounded: false,
+            },
+            weight,
+            critic: None,
+            noise_seed: 9,
+            key_cm: None,
+            kinetic,
+        }
+    }
+
     /// 100 rollout steps on the same sequences, the key distance scored as `key_cm` says:
     /// the free run's distance from the key before and after, (normalised, cm).
     fn key_lesson(key_cm: Option<f32>) -> ((f32, f32), (f32, f32)) {
@@ -1299,20 +1327,8 @@ mod tests {
         let mut rollout = |lr: f64| {
             // The same sequences every time, free-run at T = 0: a deterministic error.
             let r = KeyRollout {
-                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0, 1),
-                run: FreeRun {
-                    at,
-                    horizon: 6,
-                    temperature: 0.0,
-                    backprop_steps: None,
-                    approach: 0,
-                    bounded: false,
-                },
-                weight: 1.0,
-                critic: None,
-                noise_seed: 9,
                 key_cm,
-                kinetic: 0.0,
+                ..lesson_rollout(&corpus, at, 0.0, 1.0, 0.0)
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
             let scored = tr.step(&b, Some(&r), lr, false);
@@ -1332,22 +1348,7 @@ mod tests {
         let at = c.window - 1;
         let mut rollout = |lr: f64, kinetic: f32| {
             // The same sequences and noise every time; the key itself weighs nothing.
-            let r = KeyRollout {
-                batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0, 1),
-                run: FreeRun {
-                    at,
-                    horizon: 6,
-                    temperature: 0.5,
-                    backprop_steps: None,
-                    approach: 0,
-                    bounded: false,
-                },
-                weight: 0.0,
-                critic: None,
-                noise_seed: 9,
-                key_cm: None,
-                kinetic,
-            };
+            let r = lesson_rollout(&corpus, at, 0.5, 0.0, kinetic);
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
             tr.step(&b, Some(&r), lr, false).kinetic_mismatch
         };
