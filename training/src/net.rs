@@ -169,8 +169,9 @@ pub enum InputPath {
     /// The music features: the embedding's rows for them.
     Music,
     /// The relative level alone (`dsp::feature::FeatureLayout::RELATIVE_LEVEL`): its one
-    /// embedding row. Steady music reads near 0 dB, so the frames this row changes most are
-    /// those quieter than the song's recent peak.
+    /// embedding row and, for a `level_to_flow` network, each flow coupling's row for it.
+    /// Steady music reads near 0 dB, so the frames these rows change most are those quieter
+    /// than the song's recent peak.
     RelativeLevel,
 }
 

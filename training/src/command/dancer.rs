@@ -344,9 +344,6 @@ pub(crate) fn on_default_rig(mut dances: Vec<BuiltDance>) -> Vec<BuiltDance> {
     dances
 }
 
-/// Prints how much of the training data the quiet passages cover and what they changed: the
-/// energy heard (absolute and below the recent peak) and the joint speed inside them against the
-/// rest of their dances.
 /// Fits the normalisation of the music features whose embedding rows are all zero (a model
 /// widened to a newer feature layout: `model::neural::music_layout::upgrade` gives them mean 0,
 /// std 1) to `music`, and returns their indices. No weight reads such a feature, so its
@@ -376,6 +373,9 @@ fn refit_unread_music(model: &mut NeuralModel, music: &[[f32; FEATURE_DIM]]) -> 
     Ok(unread)
 }
 
+/// Prints how much of the training data the quiet passages cover and what they changed: the
+/// energy heard (absolute and below the recent peak) and the joint speed inside them against the
+/// rest of their dances.
 fn report_quiet_passages(dances: &[BuiltDance]) {
     use dsp::feature::FeatureLayout;
     let (mut passages, mut quiet_frames, mut frames) = (0, 0, 0);
