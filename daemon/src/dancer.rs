@@ -66,6 +66,8 @@ pub struct SourceSettings<'a> {
     pub library: Option<&'a Path>,
     /// The neural network alone: every safety net off but the non-finite guard.
     pub network_only: bool,
+    /// Where the neural dancer sends key poses (`None`: its default, the overlay).
+    pub key_route: Option<model::neural::dancer::KeyPoseRoute>,
 }
 
 /// Reads the neural model from `path`, or the shipped one when `path` is `None`.
@@ -104,6 +106,9 @@ pub fn open_source(
             }
             if settings.network_only {
                 d.set_safety_nets(SafetyNets::NETWORK_ONLY);
+            }
+            if let Some(r) = settings.key_route {
+                d.set_key_pose_route(r);
             }
             Box::new(d)
         }
@@ -197,4 +202,50 @@ pub fn standing_features(
     encoder.encode_frame(&pose, &mut out);
     encoder.encode_frame(&pose, &mut out);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dsp::feature::FEATURE_DIM;
+    use glam::Quat;
+    use model::neural::dancer::KeyPoseRoute;
+    use model::rig::{JOINT_COUNT, Joint, Pose};
+    use model::source::{Controls, KeyPoseTarget};
+
+    /// The shipped dancer's poses over the 40 frames up to a key pose's deadline (arms raised,
+    /// announced 40 frames ahead), the key sent by `route`.
+    fn towards_a_key(route: Option<KeyPoseRoute>) -> Vec<[Quat; JOINT_COUNT]> {
+        let settings = SourceSettings {
+            key_route: route,
+            ..SourceSettings::default()
+        };
+        let mut d = open_source(SourceKind::Neural, &settings, 1).expect("the shipped dancer");
+        let music = vec![[0.0f32; FEATURE_DIM]; d.lookahead_frames() + 1];
+        let mut rotations = [Quat::IDENTITY; JOINT_COUNT];
+        rotations[Joint::LeftUpperArm.index()] = Quat::from_rotation_z(1.2);
+        rotations[Joint::RightUpperArm.index()] = Quat::from_rotation_z(-1.2);
+        let mut pose = Pose::default();
+        (0..40u32)
+            .map(|f| {
+                let controls = Controls {
+                    key_pose: Some(KeyPoseTarget {
+                        rotations,
+                        frames_to_go: 39 - f,
+                    }),
+                    ..Controls::default()
+                };
+                d.step(&music, &controls, &mut pose);
+                pose.local_rotations
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_key_route_setting_reaches_the_dancer() {
+        let default = towards_a_key(None);
+        assert_eq!(default, towards_a_key(Some(KeyPoseRoute::Overlay)));
+        // The shipped network reads the key: handed to it, the dance on the way differs.
+        assert_ne!(default, towards_a_key(Some(KeyPoseRoute::Network)));
+    }
 }

@@ -93,6 +93,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             // Live, the accent travels with the controls (set from the configuration at start).
             beat_accent: None,
             foot_plant: Some(config.dancer.foot_plant),
+            key_route: Some(config.dancer.key_pose_route()),
         },
         config.dancer.seed,
     )?;

@@ -19,6 +19,7 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
         library: None,
         beat_accent: None,
         foot_plant: None,
+        key_route: None,
     };
     let a = analyze_samples(
         "demo",

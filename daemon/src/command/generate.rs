@@ -135,6 +135,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             let mut d = crate::dancer::neural_dancer(&model, seed)?;
             d.set_beat_accent(config.dancer.beat_accent);
             d.set_foot_plant(config.dancer.foot_plant);
+            d.set_key_pose_route(config.dancer.key_pose_route());
             if *network_only {
                 d.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
             }
@@ -154,6 +155,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
                 beat_accent: Some(config.dancer.beat_accent),
                 foot_plant: Some(config.dancer.foot_plant),
                 network_only: *network_only,
+                key_route: Some(config.dancer.key_pose_route()),
             },
             seed,
         )?,

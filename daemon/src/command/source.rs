@@ -23,6 +23,16 @@ pub struct SourceArgs {
     /// Dance style: auto (from the music's meter and tempo), cha-cha, rumba, tango or waltz.
     #[arg(long, value_parser = parse_style)]
     pub style: Option<String>,
+    /// Where the neural dancer sends key poses: overlay (shown over the dance, the default) or
+    /// network (the network dances to them itself).
+    #[arg(long, value_parser = parse_key_route)]
+    pub key_route: Option<String>,
+}
+
+fn parse_key_route(s: &str) -> Result<String, String> {
+    model::neural::dancer::KeyPoseRoute::parse(s)
+        .map(|r| r.name().to_string())
+        .ok_or_else(|| format!("{s:?}: expected overlay or network"))
 }
 
 fn parse_style(s: &str) -> Result<String, String> {
@@ -61,6 +71,9 @@ impl SourceArgs {
         }
         if let Some(s) = &self.style {
             config.dancer.style = s.clone();
+        }
+        if let Some(r) = &self.key_route {
+            config.dancer.key_route = r.clone();
         }
     }
 }

@@ -2,6 +2,7 @@
 //! Unknown keys are errors (a typo must not silently fall back to a default), and every error
 //! names the file and the key.
 
+use model::neural::dancer::KeyPoseRoute;
 use model::style::StyleRequest;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -255,6 +256,10 @@ pub struct DancerConfig {
     /// Dance style: `auto` (from the music's meter and tempo), `cha-cha`, `rumba`, `tango` or
     /// `waltz` (models trained before issue 21 have no style input and ignore it).
     pub style: String,
+    /// Where the neural dancer sends a key pose: `overlay` (shown over the dance, blended onto
+    /// the key by its deadline) or `network` (the network reads it and dances there itself;
+    /// the end blend still closes what it leaves).
+    pub key_route: String,
 }
 
 impl Default for DancerConfig {
@@ -269,11 +274,18 @@ impl Default for DancerConfig {
             beat_accent: model::neural::dancer::BEAT_ACCENT,
             foot_plant: model::foot_lock::DEFAULT_PLANT,
             style: "auto".into(),
+            key_route: KeyPoseRoute::Overlay.name().into(),
         }
     }
 }
 
 impl DancerConfig {
+    /// The key-pose route asked for (a validated configuration always names one; anything
+    /// else reads as the overlay).
+    pub fn key_pose_route(&self) -> KeyPoseRoute {
+        KeyPoseRoute::parse(&self.key_route).unwrap_or(KeyPoseRoute::Overlay)
+    }
+
     /// The style asked for (a validated configuration always names one; anything else reads
     /// as auto).
     pub fn style_request(&self) -> StyleRequest {
@@ -372,6 +384,12 @@ impl Config {
         let p = self.dancer.foot_plant;
         if !(p.is_finite() && (0.0..=1.0).contains(&p)) {
             return Err(bad("dancer.foot_plant", format!("= {p}: must be in 0..=1")));
+        }
+        if KeyPoseRoute::parse(&self.dancer.key_route).is_none() {
+            return Err(bad(
+                "dancer.key_route",
+                format!("= {:?}: must be overlay or network", self.dancer.key_route),
+            ));
         }
         if model::style::StyleRequest::parse(&self.dancer.style).is_none() {
             return Err(bad(
@@ -502,6 +520,18 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("dancer.model"), "{e}");
+    }
+
+    #[test]
+    fn key_route_is_checked() {
+        let c = Config::parse("[dancer]\nkey_route = \"Network\"\n", Path::new("x.toml")).unwrap();
+        assert_eq!(c.dancer.key_pose_route(), KeyPoseRoute::Network);
+        assert_eq!(
+            Config::default().dancer.key_pose_route(),
+            KeyPoseRoute::Overlay
+        );
+        let e = Config::parse("[dancer]\nkey_route = \"both\"\n", Path::new("x.toml")).unwrap_err();
+        assert!(e.to_string().contains("dancer.key_route"), "{e}");
     }
 
     #[test]

@@ -56,6 +56,25 @@ pub enum KeyPoseRoute {
     Overlay,
 }
 
+impl KeyPoseRoute {
+    /// The route named `s` (`overlay` or `network`, case-insensitive).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "overlay" => Some(KeyPoseRoute::Overlay),
+            "network" => Some(KeyPoseRoute::Network),
+            _ => None,
+        }
+    }
+
+    /// The name [`KeyPoseRoute::parse`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            KeyPoseRoute::Overlay => "overlay",
+            KeyPoseRoute::Network => "network",
+        }
+    }
+}
+
 /// Default depth of the beat accent (see [`NeuralDancer::set_beat_accent`]): none, because the
 /// shipped network learned its accent from training dances retimed within each beat
 /// (`danced-train dancer --beat-retime 0.2`); on top of that, an accent cost FID_k (42.9 against
