@@ -187,12 +187,6 @@ pub struct Net {
     /// Training-only: not stored in the model file (the live dancer samples the flow alone);
     /// a resumed run starts them afresh.
     pub aux: Vec<Dense>,
-    /// Whether the flow also reads each token's key conditioning (`NetConfig::key_to_flow`).
-    #[module(skip)]
-    pub key_to_flow: bool,
-    /// Whether the flow also reads each token's relative level (`NetConfig::level_to_flow`).
-    #[module(skip)]
-    pub level_to_flow: bool,
 }
 
 /// What one forward pass scores: the flow's NLL of the next pose per row `[b·s]`, and the
@@ -240,8 +234,6 @@ impl Net {
             transformer: Transformer::load(t, c, device)?,
             flow: Flow::load(t, "flow", &c.flow(), device)?,
             aux,
-            key_to_flow: c.key_to_flow,
-            level_to_flow: c.level_to_flow,
         })
     }
 
@@ -250,13 +242,14 @@ impl Net {
     /// `model::neural::token::key_condition` computes it live, and for a `level_to_flow` one
     /// each token's relative level.
     pub fn flow_context(&self, ctx: Tensor<2>, tokens: Tensor<3>) -> Tensor<2> {
-        if !self.key_to_flow && !self.level_to_flow {
+        let c = self.transformer.config();
+        if !c.key_to_flow && !c.level_to_flow {
             return ctx;
         }
         let [b, s, _] = tokens.dims();
         let flat = tokens.reshape([b * s, TOKEN_DIM]);
         let mut parts = vec![ctx];
-        if self.key_to_flow {
+        if c.key_to_flow {
             let flag = flat.clone().narrow(1, FLAG_AT, 1);
             let key = flat.clone().narrow(1, KEY_AT, KEY_ROT_DIM);
             let pose = flat.clone().narrow(1, POSE_AT + ROTATIONS, KEY_ROT_DIM);
@@ -266,7 +259,7 @@ impl Net {
                     .narrow(1, FTG_AT, KEY_CONDITION_DIM - KEY_ROT_DIM),
             );
         }
-        if self.level_to_flow {
+        if c.level_to_flow {
             parts.push(flat.narrow(1, LEVEL_AT, 1));
         }
         Tensor::cat(parts, 1)
@@ -294,14 +287,14 @@ impl Net {
             InputPath::Music => vec![self.transformer.embedding_rows(MUSIC_AT..KEY_AT)],
             InputPath::RelativeLevel => {
                 let mut rows = vec![self.transformer.embedding_rows(LEVEL_AT..LEVEL_AT + 1)];
-                if self.level_to_flow {
+                if c.level_to_flow {
                     rows.extend(flow_rows(c.level_condition_at(), 1));
                 }
                 rows
             }
             InputPath::Key => {
                 let mut rows = vec![self.transformer.embedding_rows(KEY_AT..TOKEN_DIM)];
-                if self.key_to_flow {
+                if c.key_to_flow {
                     rows.extend(flow_rows(c.key_condition_at(), KEY_CONDITION_DIM));
                 }
                 rows
@@ -657,8 +650,6 @@ impl Net {
             transformer: self.transformer,
             flow,
             aux: self.aux,
-            key_to_flow: self.key_to_flow,
-            level_to_flow: self.level_to_flow,
         }
     }
 }
