@@ -86,6 +86,25 @@ pub fn neural_dancer(model: &NeuralModel, seed: u64) -> Result<NeuralDancer> {
     Ok(d)
 }
 
+/// The neural dancer on `settings`' model (the shipped one by default), seeded with `seed`,
+/// dancing as `settings` say (a clip library among them is not read).
+pub fn configured_neural_dancer(settings: &SourceSettings<'_>, seed: u64) -> Result<NeuralDancer> {
+    let mut d = neural_dancer(&load_model(settings.model)?, seed)?;
+    if let Some(a) = settings.beat_accent {
+        d.set_beat_accent(a);
+    }
+    if let Some(p) = settings.foot_plant {
+        d.set_foot_plant(p);
+    }
+    if settings.network_only {
+        d.set_safety_nets(SafetyNets::NETWORK_ONLY);
+    }
+    if let Some(r) = settings.key_route {
+        d.set_key_pose_route(r);
+    }
+    Ok(d)
+}
+
 /// Opens the motion source `kind` with `settings`, seeded with `seed`.
 pub fn open_source(
     kind: SourceKind,
@@ -97,20 +116,7 @@ pub fn open_source(
             if settings.library.is_some() {
                 bail!("a clip library is for the retrieval source, not the neural one");
             }
-            let mut d = neural_dancer(&load_model(settings.model)?, seed)?;
-            if let Some(a) = settings.beat_accent {
-                d.set_beat_accent(a);
-            }
-            if let Some(p) = settings.foot_plant {
-                d.set_foot_plant(p);
-            }
-            if settings.network_only {
-                d.set_safety_nets(SafetyNets::NETWORK_ONLY);
-            }
-            if let Some(r) = settings.key_route {
-                d.set_key_pose_route(r);
-            }
-            Box::new(d)
+            Box::new(configured_neural_dancer(settings, seed)?)
         }
         SourceKind::Retrieval => {
             if settings.model.is_some() {

@@ -120,6 +120,14 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     if *network_only && kind != SourceKind::Neural {
         bail!("--network-only is for the neural source: the retrieval dancer has no network");
     }
+    let settings = SourceSettings {
+        model: config.dancer.model.as_deref(),
+        library: config.dancer.library.as_deref(),
+        beat_accent: Some(config.dancer.beat_accent),
+        foot_plant: Some(config.dancer.foot_plant),
+        network_only: *network_only,
+        key_route: Some(config.dancer.key_pose_route()),
+    };
     let started = Instant::now();
     let mut dancer: Box<dyn MotionSource> = match (kind, data) {
         // The full library, cut from the training split now (slow, needs ../shared).
@@ -131,14 +139,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             .context("starting the retrieval dancer")?,
         ),
         (SourceKind::Neural, _) if seed_pose.is_some() => {
-            let model = crate::dancer::load_model(config.dancer.model.as_deref())?;
-            let mut d = crate::dancer::neural_dancer(&model, seed)?;
-            d.set_beat_accent(config.dancer.beat_accent);
-            d.set_foot_plant(config.dancer.foot_plant);
-            d.set_key_pose_route(config.dancer.key_pose_route());
-            if *network_only {
-                d.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
-            }
+            let mut d = crate::dancer::configured_neural_dancer(&settings, seed)?;
             if let Some(name) = seed_pose {
                 d.set_seed_pose(&crate::dancer::standing_features(
                     &bank_pose(name)?.rotations,
@@ -147,18 +148,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             }
             Box::new(d)
         }
-        _ => crate::dancer::open_source(
-            kind,
-            &SourceSettings {
-                model: config.dancer.model.as_deref(),
-                library: config.dancer.library.as_deref(),
-                beat_accent: Some(config.dancer.beat_accent),
-                foot_plant: Some(config.dancer.foot_plant),
-                network_only: *network_only,
-                key_route: Some(config.dancer.key_pose_route()),
-            },
-            seed,
-        )?,
+        _ => crate::dancer::open_source(kind, &settings, seed)?,
     };
     let load_s = started.elapsed().as_secs_f64();
     let opts = AnalyzeOptions {
