@@ -67,7 +67,7 @@ pub struct SourceSettings<'a> {
     /// The neural network alone: every safety net off but the non-finite guard.
     pub network_only: bool,
     /// Where the neural dancer sends key poses (`None`: its default, the overlay).
-    pub key_route: Option<model::neural::dancer::KeyPoseRoute>,
+    pub key_route: Option<model::source::KeyPoseRoute>,
 }
 
 /// Reads the neural model from `path`, or the shipped one when `path` is `None`.
@@ -215,8 +215,8 @@ mod tests {
     use super::*;
     use dsp::feature::FEATURE_DIM;
     use glam::Quat;
-    use model::neural::dancer::KeyPoseRoute;
     use model::rig::{JOINT_COUNT, Joint, Pose};
+    use model::source::KeyPoseRoute;
     use model::source::{Controls, KeyPoseTarget};
 
     /// The shipped dancer's poses over the 40 frames up to a key pose's deadline (arms raised,

@@ -594,6 +594,7 @@ pub fn dance_to(
         key_pose: target_at(cues, i, lead),
         beat_accent: None,
         style: StyleRequest::Auto,
+        key_route: None,
     })
 }
 

@@ -175,6 +175,13 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
         "/danced/control/temperature",
         vec![OscType::String("hot".into())],
     );
+    // The key handed to the network itself (the end blend still brings it onto the pose).
+    send(
+        &control,
+        control_port,
+        "/danced/control/keypose/route",
+        vec![OscType::String("network".into())],
+    );
     let asked = Instant::now();
     send(
         &control,
@@ -290,9 +297,10 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
     assert_eq!(json["drops"], 0, "{json}");
     assert!(json["osc_control_ignored"].as_u64().unwrap() >= 3, "{json}");
     assert!(
-        json["osc_control_accepted"].as_u64().unwrap() >= 1,
+        json["osc_control_accepted"].as_u64().unwrap() >= 2,
         "{json}"
     );
+    assert_eq!(json["key_route"], "network", "{json}");
 }
 
 /// Runs 8 s of clicks at 2× with `--seed seed`, 200 frames a second (one per 10 ms of audio, so

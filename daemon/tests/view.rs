@@ -221,15 +221,23 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
         )
         .unwrap();
     assert_eq!(chosen, serde_json::Value::Bool(true));
+    // And the key route's (the pose holder has none to switch: it is only counted).
+    let routed = page
+        .eval(
+            "const r = document.getElementById('routeSelect'); r.value = 'network'; \
+             r.dispatchEvent(new Event('change')); true",
+        )
+        .unwrap();
+    assert_eq!(routed, serde_json::Value::Bool(true));
     let deadline = Instant::now() + Duration::from_secs(5);
-    while ctx.stats.controls_accepted.load(Ordering::Relaxed) < 6 && Instant::now() < deadline {
+    while ctx.stats.controls_accepted.load(Ordering::Relaxed) < 7 && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(20));
     }
 
     // The presses went through the control path (validated and counted like OSC's).
     let applied = ctx.stats.controls_accepted.load(Ordering::Relaxed);
-    assert_eq!(applied, 6, "controls applied");
-    assert_eq!(server.report().controls_accepted, 6);
+    assert_eq!(applied, 7, "controls applied");
+    assert_eq!(server.report().controls_accepted, 7);
     assert_eq!(server.report().controls_ignored, 0);
 
     let png = page.screenshot_png().unwrap();

@@ -217,6 +217,9 @@ function showStatus(s) {
   $('accent').textContent = s.accent == null ? '–' : s.accent.toFixed(2);
   // The style danced, and whether the music chose it (auto); none for a dancer without styles.
   $('style').textContent = s.style == null ? '–' : (s.style_auto ? `${s.style} (auto)` : s.style);
+  // Where key poses go, once no key is pending (none for a dancer without a route).
+  $('route').textContent = s.key_route ?? '–';
+  if (s.key_route && document.activeElement !== $('routeSelect')) $('routeSelect').value = s.key_route;
   const rate = state.hello?.model_rate_hz || 25;
   $('key').textContent = s.key_pose === 'pending'
     ? `${s.key_pose_name ?? '?'} in ${(s.key_pose_frames_to_go / rate).toFixed(2)} s`
@@ -354,6 +357,7 @@ function throttled(fn, ms) {
 $('temperature').oninput = throttled((e) => send('/danced/control/temperature', [['f', Number(e.target.value)]]), 50);
 $('accentSlider').oninput = throttled((e) => send('/danced/control/accent', [['f', Number(e.target.value)]]), 50);
 $('styleSelect').onchange = (e) => send('/danced/control/style', [['s', e.target.value]]);
+$('routeSelect').onchange = (e) => send('/danced/control/keypose/route', [['s', e.target.value]]);
 $('pause').onclick = () => send($('pause').dataset.paused ? '/danced/control/resume' : '/danced/control/pause');
 $('seed').onclick = () => send('/danced/control/seed', [['i', Math.floor(Math.random() * 2147483647)]]);
 

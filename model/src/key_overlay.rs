@@ -132,6 +132,15 @@ impl KeyOverlay {
         }
     }
 
+    /// Whether no cue was pending at the last frame and none is being let go: read before
+    /// this frame's [`KeyOverlay::read_cue`], the next [`KeyOverlay::weights`] would release
+    /// nothing and blend in only a cue that starts now.
+    pub fn at_rest(&self) -> bool {
+        self.lead == 0
+            && self.blend_last == 0.0
+            && self.since_release.saturating_add(1) >= KEY_RELEASE_FRAMES
+    }
+
     /// The rotations of the cue being blended in.
     pub fn target(&self) -> &[Quat; JOINT_COUNT] {
         &self.target

@@ -27,6 +27,39 @@ pub struct KeyPoseTarget {
     pub frames_to_go: u32,
 }
 
+/// Where the neural dancer sends a key pose while its end blend is on. With the blend off (or
+/// its frames 0) the key always goes to the network: nothing else would bring it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KeyPoseRoute {
+    /// The network reads the key and the blend's pose is fed back to it, so it sees itself
+    /// arrive and dances on from the key pose.
+    Network,
+    /// The network dances on without the key; only the pose shown is blended onto the key and,
+    /// after the deadline, glides back onto the network's dance. The shipped route: the
+    /// shipped network's own approach to a key is far less like dancing (`danced eval`'s
+    /// transition table).
+    Overlay,
+}
+
+impl KeyPoseRoute {
+    /// The route named `s` (`overlay` or `network`, case-insensitive).
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "overlay" => Some(KeyPoseRoute::Overlay),
+            "network" => Some(KeyPoseRoute::Network),
+            _ => None,
+        }
+    }
+
+    /// The name [`KeyPoseRoute::parse`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            KeyPoseRoute::Overlay => "overlay",
+            KeyPoseRoute::Network => "network",
+        }
+    }
+}
+
 /// Live controls passed with every frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Controls {
@@ -39,6 +72,9 @@ pub struct Controls {
     pub beat_accent: Option<f32>,
     /// The style to dance (sources without a style input ignore it).
     pub style: StyleRequest,
+    /// Where key poses go, overriding the source's own route (None keeps it; sources without
+    /// a route ignore it). A change takes effect once no key pose is pending or being let go.
+    pub key_route: Option<KeyPoseRoute>,
 }
 
 impl Default for Controls {
@@ -49,6 +85,7 @@ impl Default for Controls {
             key_pose: None,
             beat_accent: None,
             style: StyleRequest::Auto,
+            key_route: None,
         }
     }
 }
@@ -74,6 +111,11 @@ pub trait MotionSource {
 
     /// Starts a new performance from scratch, seeding any randomness with `seed`.
     fn reset(&mut self, seed: u64);
+
+    /// Where key poses went at the last frame (`None`: the source has no route to choose).
+    fn key_route(&self) -> Option<KeyPoseRoute> {
+        None
+    }
 
     /// The style danced at the last frame (`None`: the source has no style input).
     fn style(&self) -> Option<crate::style::DanceStyle> {

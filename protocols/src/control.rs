@@ -85,6 +85,9 @@ impl TryFrom<String> for Quantize {
 /// What `/style N` and a MIDI style target's values 0–4 name.
 pub const STYLE_NUMBERS: [&str; 5] = ["auto", "cha-cha", "rumba", "tango", "waltz"];
 
+/// What `/keypose/route N` and a MIDI key-route target's two halves name.
+pub const KEY_ROUTE_NUMBERS: [&str; 2] = ["overlay", "network"];
+
 /// A live control change from OSC or MIDI.
 #[derive(Clone, Debug, PartialEq)]
 pub enum ControlEvent {
@@ -109,6 +112,10 @@ pub enum ControlEvent {
     /// lower-cased here, resolved and counted by the receiver), or a number: 0 = auto, 1–4 =
     /// those styles in that order.
     DanceStyle(String),
+    /// Where key poses go, by name (`overlay`: shown over the dance; `network`: danced to by
+    /// the network itself; lower-cased here, resolved and counted by the receiver), or a
+    /// number: 0 = overlay, 1 = network.
+    KeyPoseRoute(String),
     /// Freeze the dance.
     Pause,
     /// Unfreeze the dance.
@@ -266,6 +273,17 @@ impl ControlParser {
                     _ => return Err(Reject::BadArguments),
                 };
                 ControlEvent::DanceStyle(name)
+            }
+            "/keypose/route" => {
+                let name = match args.as_slice() {
+                    [OscType::String(s)] if !s.trim().is_empty() => s.trim().to_lowercase(),
+                    [a] => match as_int(a)? {
+                        n @ 0..=1 => KEY_ROUTE_NUMBERS[n as usize].to_string(),
+                        _ => return Err(Reject::BadArguments),
+                    },
+                    _ => return Err(Reject::BadArguments),
+                };
+                ControlEvent::KeyPoseRoute(name)
             }
             "/transition" => {
                 let beats = one_float(args)?;
@@ -505,6 +523,18 @@ mod tests {
                 ControlEvent::DanceStyle("auto".into()),
             ),
             (
+                msg("/danced/control/keypose/route", vec![s(" Network ")]),
+                ControlEvent::KeyPoseRoute("network".into()),
+            ),
+            (
+                msg("/danced/control/keypose/route", vec![OscType::Int(0)]),
+                ControlEvent::KeyPoseRoute("overlay".into()),
+            ),
+            (
+                msg("/danced/control/keypose/route", vec![OscType::Float(1.0)]),
+                ControlEvent::KeyPoseRoute("network".into()),
+            ),
+            (
                 msg("/danced/control/seed", vec![OscType::Int(1234)]),
                 ControlEvent::StyleSeed(1234),
             ),
@@ -599,6 +629,9 @@ mod tests {
             msg("/danced/control/style", vec![]),
             msg("/danced/control/style", vec![OscType::Int(5)]),
             msg("/danced/control/style", vec![s(" ")]),
+            msg("/danced/control/keypose/route", vec![]),
+            msg("/danced/control/keypose/route", vec![OscType::Int(2)]),
+            msg("/danced/control/keypose/route", vec![s("")]),
             msg("/danced/control/seed", vec![OscType::Float(-3.0)]),
             msg("/danced/control/seed", vec![OscType::Float(0.5)]),
             msg("/danced/control/tempo", vec![OscType::Float(20.0)]),

@@ -1,7 +1,8 @@
 //! What MIDI input means to the dancer, loaded from a TOML file (format in the crate README).
 
 use crate::control::{
-    BEAT_ACCENT_RANGE, ControlEvent, Quantize, STYLE_NUMBERS, TEMPERATURE_RANGE, TEMPO_HINT_RANGE,
+    BEAT_ACCENT_RANGE, ControlEvent, KEY_ROUTE_NUMBERS, Quantize, STYLE_NUMBERS, TEMPERATURE_RANGE,
+    TEMPO_HINT_RANGE,
 };
 use crate::error::ProtocolError;
 use crate::midi::{MidiMessage, MidiParser};
@@ -27,6 +28,10 @@ pub enum CcTarget {
     /// Dance style: the controller's travel in five equal zones, auto, cha-cha, rumba, tango,
     /// waltz (`min` and `max` are not used).
     Style,
+    /// Where key poses go: the controller's lower half the overlay, its upper half the
+    /// network (a toggle sending 0 / 127 switches them; `min` and `max` are not used).
+    #[serde(rename = "key_route")]
+    KeyRoute,
 }
 
 /// One note → key pose rule as written in the file.
@@ -196,6 +201,9 @@ impl MidiMap {
                             let zone = usize::from(value.min(127)) * STYLE_NUMBERS.len() / 128;
                             ControlEvent::DanceStyle(STYLE_NUMBERS[zone].to_string())
                         }
+                        CcTarget::KeyRoute => ControlEvent::KeyPoseRoute(
+                            KEY_ROUTE_NUMBERS[usize::from(value.min(127) >= 64)].to_string(),
+                        ),
                     });
                 }
             }
@@ -400,6 +408,12 @@ mod tests {
         assert_eq!(map(&mut m, cc(75, 64)), style("rumba"));
         assert_eq!(map(&mut m, cc(75, 90)), style("tango"));
         assert_eq!(map(&mut m, cc(75, 127)), style("waltz"));
+        // CC 80, a switch: off shows key poses over the dance, on hands them to the network.
+        let route = |name: &str| vec![ControlEvent::KeyPoseRoute(name.into())];
+        assert_eq!(map(&mut m, cc(80, 0)), route("overlay"));
+        assert_eq!(map(&mut m, cc(80, 63)), route("overlay"));
+        assert_eq!(map(&mut m, cc(80, 64)), route("network"));
+        assert_eq!(map(&mut m, cc(80, 127)), route("network"));
         assert!(map(&mut m, cc(7, 64)).is_empty());
         assert_eq!(
             map(

@@ -205,6 +205,12 @@ fn stepping_the_dancer_does_not_allocate() {
                     4 => model::style::StyleRequest::Auto,
                     k => model::style::StyleRequest::Style(model::style::DanceStyle::ALL[k]),
                 },
+                // And the key route switched live.
+                key_route: Some(if i % 400 < 200 {
+                    model::source::KeyPoseRoute::Overlay
+                } else {
+                    model::source::KeyPoseRoute::Network
+                }),
             };
             dancer.step(&music[i..=i + look], &controls, &mut pose);
         }

@@ -173,6 +173,10 @@ pub enum InputPath {
     /// Steady music reads near 0 dB, so the frames these rows change most are those quieter
     /// than the song's recent peak.
     RelativeLevel,
+    /// The style input: the style embedding's rows (none for a network without one). A
+    /// token without a style reads none of them, so they cannot change how the network
+    /// dances unconditioned.
+    Style,
 }
 
 /// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
@@ -292,6 +296,7 @@ impl Net {
                 }
                 rows
             }
+            InputPath::Style => self.transformer.style_rows().into_iter().collect(),
             InputPath::Key => {
                 let mut rows = vec![self.transformer.embedding_rows(KEY_AT..TOKEN_DIM)];
                 if c.key_to_flow {

@@ -15,7 +15,7 @@ use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::file::NeuralModel;
 use model::neural::rng::Rng;
-use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
 use model::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 
 /// Shortest key-pose horizon drawn in training, frames (0.5 s).
@@ -109,6 +109,19 @@ pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
 /// weighted zero: it dances exactly as before until training moves it.
 pub fn add_level_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
     widen_flow_context(model, |c| c.level_to_flow = true)
+}
+
+/// Gives a model without a style input one (`DanceStyle::COUNT` styles, every row zero): it
+/// dances exactly as before, with or without a style, until training moves the rows.
+pub fn add_style_input(model: &mut NeuralModel) {
+    if model.config.styles > 0 {
+        return;
+    }
+    let (styles, d) = (model::style::DanceStyle::COUNT, model.config.d_model);
+    model
+        .tensors
+        .insert(STYLE_EMBEDDING, &[styles, d], vec![0.0; styles * d]);
+    model.config.styles = styles;
 }
 
 /// Gives `model` the flow inputs `change` adds to its config, as zero rows of each coupling's
@@ -1560,6 +1573,63 @@ mod tests {
         let mut moved = moved;
         moved.sort();
         assert_eq!(moved, want);
+    }
+
+    #[test]
+    fn a_style_input_given_to_a_network_without_one_learns_alone() {
+        let c = NetConfig {
+            styles: 0,
+            ..NetConfig::tiny()
+        };
+        let (motion, music) = periodic_dance();
+        let norm = Normalizer::fit(&motion, &music);
+        let plain = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
+        let mut tr = fresh_trainer(c, &norm);
+        let mut rng = Rng::new(2);
+        tr.data_init(&plain.random_batch(&mut rng, 8, 0.5));
+        for _ in 0..30 {
+            tr.step(&plain.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
+        }
+        let mut start = tr.model().clone();
+        let mut before = Runtime::new(&start.tensors, &start.config).unwrap();
+        add_style_input(&mut start);
+        assert_eq!(start.config.styles, model::style::DanceStyle::COUNT);
+        // Unconditioned or not, it dances as before until trained.
+        let mut after = Runtime::new(&start.tensors, &start.config).unwrap();
+        after.set_style(Some(1));
+        let mut r = Rng::new(3);
+        let (mut a, mut b) = (vec![0.0; P], vec![0.0; P]);
+        for i in 0..12 {
+            let tok: Vec<f32> = (0..TOKEN_DIM).map(|_| r.normal()).collect();
+            before.push(&tok);
+            after.push(&tok);
+            let z: Vec<f32> = (0..P).map(|_| r.normal()).collect();
+            before.sample(&z, &mut a);
+            after.sample(&z, &mut b);
+            assert_eq!(a, b, "token {i}");
+        }
+        // Trained on a dance of style 1, only that style's row moves.
+        let c = start.config;
+        let styled = Corpus::new(
+            &[(&motion[..], &music[..], Some(1))],
+            &norm,
+            &c,
+            2 * c.window,
+        );
+        let mut tr = Trainer::new(start.clone())
+            .unwrap()
+            .training_only(InputPath::Style);
+        let val = styled.all_sequences();
+        let nll_before = tr.evaluate(&val).unwrap();
+        for _ in 0..30 {
+            tr.step(&styled.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
+        }
+        let nll_after = tr.evaluate(&val).unwrap();
+        assert!(nll_after < nll_before, "NLL {nll_before} → {nll_after}");
+        assert_eq!(
+            moved_rows(&start.tensors, &tr.model().tensors),
+            vec![(STYLE_EMBEDDING.to_string(), vec![1])]
+        );
     }
 
     /// The critic's full term: every frame, no floor, no fade (to measure with at learning

@@ -154,6 +154,14 @@ impl Transformer {
         }
     }
 
+    /// The style embedding's rows, one per style (None: a network without a style input).
+    pub fn style_rows(&self) -> Option<WeightRows> {
+        self.style.as_ref().map(|s| WeightRows {
+            param: s.id,
+            rows: 0..self.config.styles,
+        })
+    }
+
     /// Context vectors `[b·s, d_model]` for tokens `[b, s, TOKEN_DIM]`; row b·s + t sees
     /// tokens t − window + 1 ..= t of its sequence. `styles` is one row per token `[b·s,
     /// styles]` (one-hot, or zeros: unconditioned), ignored by a network without a style input.

@@ -43,6 +43,10 @@ pub struct EvalArgs {
     /// the neural rows: the shipped setting, without the final blend, and the network alone.
     #[arg(long, conflicts_with_all = ["quick", "ground_truth", "music", "training_songs"])]
     pub keys: bool,
+    /// How strongly the neural rows' style steers them (models with a style input: 1 as
+    /// trained, 0 unconditioned, above 1 exaggerated).
+    #[arg(long, default_value_t = 1.0)]
+    pub style_strength: f32,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -59,6 +63,16 @@ const NETWORK_ONLY: &str = "neural, network only";
 /// Whether a row is one of the neural dancer's ablations (one net changed).
 fn ablation(name: &str) -> bool {
     [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name)
+}
+
+/// The neural dancer on `model`, seeded and steered by the options.
+fn neural_dancer(
+    o: &EvalArgs,
+    model: &model::neural::file::NeuralModel,
+) -> Result<model::neural::dancer::NeuralDancer> {
+    let mut d = crate::dancer::neural_dancer(model, o.seed)?;
+    d.set_style_strength(o.style_strength);
+    Ok(d)
 }
 
 /// The dancers scored: retrieval (and on the full library), the neural dancer on `model` as
@@ -81,25 +95,22 @@ fn sources(
     for (name, lib) in libraries {
         sources.push((name.to_string(), Box::new(crate::eval::retrieval(lib)?)));
     }
-    sources.push((
-        "neural".into(),
-        Box::new(crate::dancer::neural_dancer(model, o.seed)?),
-    ));
+    sources.push(("neural".into(), Box::new(neural_dancer(o, model)?)));
     // Ablations: the network's own timing, a fresh noise draw every frame, free feet.
-    let mut own_timing = crate::dancer::neural_dancer(model, o.seed)?;
+    let mut own_timing = neural_dancer(o, model)?;
     own_timing.set_beat_accent(0.0);
     sources.push((NO_ACCENT.into(), Box::new(own_timing)));
-    let mut fresh_noise = crate::dancer::neural_dancer(model, o.seed)?;
+    let mut fresh_noise = neural_dancer(o, model)?;
     fresh_noise.set_noise_correlation(0.0);
     sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
-    let mut free_feet = crate::dancer::neural_dancer(model, o.seed)?;
+    let mut free_feet = neural_dancer(o, model)?;
     free_feet.set_safety_nets(model::neural::safety::SafetyNets {
         foot_lock: false,
         ..model::neural::safety::SafetyNets::SHIPPED
     });
     sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
     // The network alone: every safety net off but the non-finite guard.
-    let mut alone = crate::dancer::neural_dancer(model, o.seed)?;
+    let mut alone = neural_dancer(o, model)?;
     alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
     sources.push((NETWORK_ONLY.into(), Box::new(alone)));
     Ok(sources)
@@ -115,7 +126,7 @@ fn training_songs_table(o: &EvalArgs, temperatures: &[f32], started: Instant) ->
         started.elapsed().as_secs_f64()
     );
     let model = crate::dancer::load_model(o.model.as_deref())?;
-    let mut dancer = crate::dancer::neural_dancer(&model, o.seed)?;
+    let mut dancer = neural_dancer(o, &model)?;
     let mut rows = vec![set.score("ground truth, training dances", &set.ground_truth())?];
     for &t in temperatures {
         let (motions, _) = set.generate(&mut dancer, t, o.seed);
@@ -198,9 +209,9 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         }
     }
     // With each style requested in turn on every song (models with a style input).
-    let probe = crate::dancer::neural_dancer(&model, o.seed)?;
+    let probe = neural_dancer(o, &model)?;
     if probe.has_style_input() {
-        let mut alone = crate::dancer::neural_dancer(&model, o.seed)?;
+        let mut alone = neural_dancer(o, &model)?;
         alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
         for (label, mut dancer) in [
             ("neural T=0.5", probe),
@@ -270,7 +281,7 @@ fn key_tables(
     key_table += " | cues |\n| --- |";
     key_table += &" --- |".repeat(KEY_HORIZONS_S.len() + 1);
     key_table += "\n";
-    let mut unaided = crate::dancer::neural_dancer(model, o.seed)?;
+    let mut unaided = neural_dancer(o, model)?;
     unaided.set_key_blend_frames(0);
     let unaided_name = "neural without the final blend".to_string();
     for (name, dancer) in sources
@@ -297,8 +308,8 @@ fn key_tables(
         "\n| system | FID_k of the {s} s before key poses ↓ | of the {s} s after them ↓ | of the same windows danced free ↓ | before / free (target ≤ 1.25) | after / free | joint speed before / free, m/s | windows |\n| --- | --- | --- | --- | --- | --- | --- | --- |",
         s = crate::eval::TRANSITION_S
     );
-    let mut led = crate::dancer::neural_dancer(model, o.seed)?;
-    led.set_key_pose_route(model::neural::dancer::KeyPoseRoute::Network);
+    let mut led = neural_dancer(o, model)?;
+    led.set_key_pose_route(model::source::KeyPoseRoute::Network);
     let led_name = "neural, key to the network".to_string();
     for (name, dancer) in sources
         .iter_mut()

@@ -180,6 +180,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
             key_pose: crate::key_cue::target_at(&cues, i, lead_frames),
             beat_accent: None,
             style,
+            key_route: None,
         },
     );
     let step_s = step_start.elapsed().as_secs_f64();

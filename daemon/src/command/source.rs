@@ -30,7 +30,7 @@ pub struct SourceArgs {
 }
 
 fn parse_key_route(s: &str) -> Result<String, String> {
-    model::neural::dancer::KeyPoseRoute::parse(s)
+    model::source::KeyPoseRoute::parse(s)
         .map(|r| r.name().to_string())
         .ok_or_else(|| format!("{s:?}: expected overlay or network"))
 }

@@ -2,7 +2,7 @@
 //! Unknown keys are errors (a typo must not silently fall back to a default), and every error
 //! names the file and the key.
 
-use model::neural::dancer::KeyPoseRoute;
+use model::source::KeyPoseRoute;
 use model::style::StyleRequest;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -23,6 +23,7 @@ use protocols::control::{
 use super::sink::PoseBank;
 use super::stats::Stats;
 use super::wire::{ControlEvent, Quantize};
+use model::source::KeyPoseRoute;
 use model::style::{DanceStyle, StyleRequest};
 
 /// Events one input may queue before the motion thread takes them.
@@ -47,6 +48,8 @@ pub enum MotionCommand {
     StyleSeed(u64),
     /// New dance style (or auto).
     DanceStyle(StyleRequest),
+    /// New route for key poses.
+    KeyPoseRoute(KeyPoseRoute),
     /// Reach the key pose at this index of the pose table.
     KeyPose {
         /// Index in [`ControlHub::table`]'s order.
@@ -93,6 +96,23 @@ struct Params {
     seed: ParamSlot,
     /// 0 = auto, 1 + index = that [`DanceStyle`].
     style: ParamSlot,
+    /// [`route_bits`].
+    key_route: ParamSlot,
+}
+
+fn route_bits(route: KeyPoseRoute) -> u64 {
+    match route {
+        KeyPoseRoute::Overlay => 0,
+        KeyPoseRoute::Network => 1,
+    }
+}
+
+fn route_of_bits(bits: u64) -> KeyPoseRoute {
+    if bits == 1 {
+        KeyPoseRoute::Network
+    } else {
+        KeyPoseRoute::Overlay
+    }
 }
 
 fn style_bits(request: StyleRequest) -> u64 {
@@ -302,6 +322,11 @@ impl ControlSender {
                 self.offer(&p.style, style_bits(request));
                 return Ok(());
             }
+            ControlEvent::KeyPoseRoute(name) => {
+                let route = KeyPoseRoute::parse(&name).ok_or(ControlRefusal::OutOfRange)?;
+                self.offer(&p.key_route, route_bits(route));
+                return Ok(());
+            }
             ControlEvent::KeyPose { name, quantize } => {
                 let Some(&pose) = self.names.get(&name) else {
                     return Err(ControlRefusal::UnknownPose(name));
@@ -350,6 +375,9 @@ impl ControlReceiver {
         }
         if let Some(bits) = p.style.take() {
             apply(MotionCommand::DanceStyle(style_of_bits(bits)));
+        }
+        if let Some(bits) = p.key_route.take() {
+            apply(MotionCommand::KeyPoseRoute(route_of_bits(bits)));
         }
         for c in &mut self.consumers {
             while let Ok(command) = c.pop() {
@@ -456,6 +484,7 @@ mod tests {
             ControlEvent::TransitionBeats(65.0),
             ControlEvent::TempoHint(20.0),
             ControlEvent::DanceStyle("polka".into()),
+            ControlEvent::KeyPoseRoute("both".into()),
         ] {
             assert_eq!(
                 tx.send(bad.clone()),
@@ -463,7 +492,30 @@ mod tests {
                 "{bad:?}"
             );
         }
-        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 7);
+        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 8);
+    }
+
+    #[test]
+    fn a_key_route_by_name_reaches_the_motion_thread_newest_first() {
+        let (mut hub, stats) = hub();
+        let mut tx = hub.sender();
+        let (mut rx, _) = hub.into_receiver();
+        tx.send(ControlEvent::KeyPoseRoute("network".into()))
+            .unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![MotionCommand::KeyPoseRoute(KeyPoseRoute::Network)]
+        );
+        tx.send(ControlEvent::KeyPoseRoute("network".into()))
+            .unwrap();
+        tx.send(ControlEvent::KeyPoseRoute("overlay".into()))
+            .unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![MotionCommand::KeyPoseRoute(KeyPoseRoute::Overlay)]
+        );
+        assert_eq!(stats.controls_coalesced.load(Ordering::Relaxed), 1);
+        assert!(drain(&mut rx).is_empty());
     }
 
     #[test]

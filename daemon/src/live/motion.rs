@@ -124,6 +124,7 @@ pub fn run(
             key_pose: None,
             beat_accent: settings.beat_accent,
             style: settings.style,
+            key_route: None,
         },
         transition_beats: settings.transition_beats,
         tempo_hint: 0.0,
@@ -143,6 +144,7 @@ pub fn run(
             .beat_accent
             .set(st.controls.beat_accent.unwrap_or(f32::NAN));
         stats.paused.store(u32::from(st.paused), Ordering::Relaxed);
+        stats.set_key_route(source.key_route());
         stats.set_style_danced(
             source.style(),
             st.controls.style == model::style::StyleRequest::Auto,
@@ -251,6 +253,7 @@ fn apply(
         MotionCommand::TransitionBeats(b) => st.transition_beats = b,
         MotionCommand::StyleSeed(seed) => source.reseed(seed),
         MotionCommand::DanceStyle(style) => st.controls.style = style,
+        MotionCommand::KeyPoseRoute(route) => st.controls.key_route = Some(route),
         MotionCommand::Pause => st.paused = true,
         MotionCommand::Resume => st.paused = false,
         MotionCommand::TempoHint(bpm) => st.tempo_hint = bpm,

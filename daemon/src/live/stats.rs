@@ -26,6 +26,7 @@ use serde::Serialize;
 
 use crate::alloc_counter::RtThread;
 use model::neural::safety::SafetyCounts;
+use model::source::KeyPoseRoute;
 
 /// Allocations (and frees) counted per real-time thread since the process started.
 #[derive(Clone, Copy, Debug, Default, Serialize, PartialEq, Eq)]
@@ -237,6 +238,8 @@ pub struct Stats {
     pub style: AtomicU32,
     /// 1 while the style is `auto` (chosen from the music), 0 while one is requested.
     pub style_auto: AtomicU32,
+    /// Where key poses go: 0 = the source has no route, 1 = overlay, 2 = network.
+    pub key_route: AtomicU32,
     /// What the dancer's safety nets did (neural dancer only).
     pub safety: SafetyGauges,
     rss: Mutex<Vec<(f64, u64)>>,
@@ -295,6 +298,7 @@ impl Stats {
             paused: AtomicU32::new(0),
             style: AtomicU32::new(0),
             style_auto: AtomicU32::new(1),
+            key_route: AtomicU32::new(0),
             // One sample a second: two hours before this ever grows.
             rss: Mutex::new(Vec::with_capacity(7200)),
         }
@@ -325,6 +329,25 @@ impl Stats {
         let v = style.map_or(0, |s| 1 + s.index() as u32);
         self.style.store(v, Ordering::Relaxed);
         self.style_auto.store(u32::from(auto), Ordering::Relaxed);
+    }
+
+    /// Records where key poses go (None: the source has no route to choose).
+    pub fn set_key_route(&self, route: Option<KeyPoseRoute>) {
+        let v = match route {
+            None => 0,
+            Some(KeyPoseRoute::Overlay) => 1,
+            Some(KeyPoseRoute::Network) => 2,
+        };
+        self.key_route.store(v, Ordering::Relaxed);
+    }
+
+    /// Where key poses go, as last recorded.
+    pub fn key_route(&self) -> Option<KeyPoseRoute> {
+        match self.key_route.load(Ordering::Relaxed) {
+            1 => Some(KeyPoseRoute::Overlay),
+            2 => Some(KeyPoseRoute::Network),
+            _ => None,
+        }
     }
 
     /// The style danced, as last recorded.
@@ -409,6 +432,7 @@ impl Stats {
             midi_queue_full: 0,
             safety_nets: self.safety.load(),
             style: self.style_danced().map(|s| s.name()),
+            key_route: self.key_route().map(|r| r.name()),
             view: None,
         }
     }
@@ -584,6 +608,9 @@ pub struct StatsReport {
     /// The style danced at the end (sources with a style input only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub style: Option<&'static str>,
+    /// Where key poses went at the end (sources with a route only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub key_route: Option<&'static str>,
     /// The browser view's counters, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub view: Option<crate::view::ViewReport>,

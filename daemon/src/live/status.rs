@@ -31,8 +31,9 @@ pub fn status_line(stats: &Stats) -> String {
         Some(s) => s.name().to_string(),
         None => "–".to_string(),
     };
+    let route = stats.key_route().map_or("–", |r| r.name());
     format!(
-        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | style {style} | key pose {key} | drops {} | packets {}{paused}",
+        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | style {style} | key pose {key} ({route}) | drops {} | packets {}{paused}",
         stats.tempo_bpm.get(),
         stats.beat_phase.get(),
         stats.latency.quantile_ms(0.99),

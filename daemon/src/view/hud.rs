@@ -43,6 +43,8 @@ pub struct ViewStatus {
     pub style: Option<&'static str>,
     /// Whether the music chose the style (`auto`) rather than the performer.
     pub style_auto: bool,
+    /// Where key poses go: `"overlay"` or `"network"` (None: a dancer without a route).
+    pub key_route: Option<&'static str>,
     /// `"none"`, `"pending"` or `"reached"`.
     pub key_pose: &'static str,
     /// The pending (or last reached) key pose's name.
@@ -76,6 +78,7 @@ impl ViewStatus {
             accent: accent.is_finite().then_some(accent),
             style: stats.style_danced().map(|s| s.name()),
             style_auto: stats.style_auto.load(Ordering::Relaxed) == 1,
+            key_route: stats.key_route().map(|r| r.name()),
             key_pose: match key {
                 KEY_POSE_PENDING => "pending",
                 KEY_POSE_REACHED => "reached",

@@ -25,7 +25,7 @@ use crate::neural::safety::{SafetyCounts, SafetyNets};
 use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 use crate::rig::{Pose, Skeleton};
 use crate::rotation::{quat_to_6d, sixd_to_quat};
-use crate::source::{Controls, MotionSource, finite_clamp};
+use crate::source::{Controls, KeyPoseRoute, MotionSource, finite_clamp};
 use crate::style::{DanceStyle, StyleFromMusic, StyleRequest};
 
 /// A normalised output beyond this many standard deviations counts as exploding.
@@ -41,39 +41,6 @@ pub const RANGE_MARGIN: f32 = 0.05;
 pub const CONSTANT_FEATURE_RANGE: f32 = 1e-3;
 
 pub use crate::key_overlay::{KEY_BLEND_FRAMES, KEY_RELEASE_FRAMES};
-
-/// Where a key pose goes while the end blend is on. With the blend off (or its frames 0) the
-/// key always goes to the network: nothing else would bring it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum KeyPoseRoute {
-    /// The network reads the key and the blend's pose is fed back to it, so it sees itself
-    /// arrive and dances on from the key pose.
-    Network,
-    /// The network dances on without the key; only the pose shown is blended onto the key and,
-    /// after the deadline, glides back onto the network's dance. The shipped route: the
-    /// shipped network's own approach to a key is far less like dancing (`danced eval`'s
-    /// transition table).
-    Overlay,
-}
-
-impl KeyPoseRoute {
-    /// The route named `s` (`overlay` or `network`, case-insensitive).
-    pub fn parse(s: &str) -> Option<Self> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "overlay" => Some(KeyPoseRoute::Overlay),
-            "network" => Some(KeyPoseRoute::Network),
-            _ => None,
-        }
-    }
-
-    /// The name [`KeyPoseRoute::parse`] reads.
-    pub fn name(self) -> &'static str {
-        match self {
-            KeyPoseRoute::Overlay => "overlay",
-            KeyPoseRoute::Network => "network",
-        }
-    }
-}
 
 /// Default depth of the beat accent (see [`NeuralDancer::set_beat_accent`]): none, because the
 /// shipped network learned its accent from training dances retimed within each beat
@@ -107,9 +74,26 @@ pub const RESTART_AFTER_HELD: u32 = 4;
 /// Frames over which the pose glides from where the dancer stood to the restarted motion.
 pub const RESTART_BLEND_FRAMES: u32 = 10;
 
+/// Pushes `token` through `runtime` and its unconditioned twin `plain` (which keeps the same
+/// past, so the style can be steered at any frame), steering `runtime` by `strength`.
+fn push_guided(runtime: &mut Runtime, plain: Option<&mut Runtime>, token: &[f32], strength: f32) {
+    runtime.push(token);
+    if let Some(plain) = plain {
+        plain.push(token);
+        if strength != 1.0 {
+            runtime.guide(plain, strength);
+        }
+    }
+}
+
 /// The neural motion source.
 pub struct NeuralDancer {
     runtime: Runtime,
+    /// The same network fed the same tokens without a style, for a model with a style input
+    /// (the reference [`Runtime::guide`] steers from).
+    plain: Option<Runtime>,
+    /// How strongly the style steers the dance (1: as trained).
+    style_strength: f32,
     norm: Normalizer,
     seed_motion: Vec<f32>,
     /// Per style (by index), its own seed clip, normalised (motion, music); empty for a model
@@ -139,7 +123,11 @@ pub struct NeuralDancer {
     nets: SafetyNets,
     counts: SafetyCounts,
     key_blend_frames: u32,
+    /// The route set up ([`NeuralDancer::set_key_pose_route`]), and the one in effect (a
+    /// route asked for live takes over once no key is pending or being let go: switched
+    /// halfway, the pose shown would jump).
     key_route: KeyPoseRoute,
+    route_now: KeyPoseRoute,
     /// The key pose shown over the dance, and the rotations let go (raw 6D).
     overlay: KeyOverlay,
     released_raw: Vec<f32>,
@@ -162,6 +150,11 @@ impl NeuralDancer {
     /// A dancer running `model` (validated already if it came from [`NeuralModel::load`]).
     pub fn new(model: &NeuralModel) -> Result<Self, ModelFileError> {
         let runtime = Runtime::new(&model.tensors, &model.config)?;
+        let plain = if model.config.styles > 0 {
+            Some(Runtime::new(&model.tensors, &model.config)?)
+        } else {
+            None
+        };
         let norm = model.normalizer()?;
         let (motion, music) = model.seed_clip()?;
         let (seed_motion, seed_music) = normalised_clip(&norm, motion, music);
@@ -193,6 +186,8 @@ impl NeuralDancer {
         let mut d = NeuralDancer {
             horizon_frames: model.training.horizon_frames,
             runtime,
+            plain,
+            style_strength: 1.0,
             norm,
             low,
             high,
@@ -220,6 +215,7 @@ impl NeuralDancer {
             counts: SafetyCounts::default(),
             key_blend_frames: KEY_BLEND_FRAMES,
             key_route: KeyPoseRoute::Overlay,
+            route_now: KeyPoseRoute::Overlay,
             overlay: KeyOverlay::default(),
             released_raw: vec![0.0; KEY_ROT_DIM],
             beat_accent: BEAT_ACCENT,
@@ -252,6 +248,7 @@ impl NeuralDancer {
     /// Sets where key poses go while the end blend is on (default [`KeyPoseRoute::Overlay`]).
     pub fn set_key_pose_route(&mut self, route: KeyPoseRoute) {
         self.key_route = route;
+        self.route_now = route;
     }
 
     /// Sets the most frames over which a key pose is blended in before its deadline (0: the
@@ -300,6 +297,9 @@ impl NeuralDancer {
     /// The seed clip of the style danced now (its own, where the model has one).
     fn prime(&mut self) {
         self.runtime.reset();
+        if let Some(plain) = self.plain.as_mut() {
+            plain.reset();
+        }
         let (seed_motion, seed_music) = match self.style_seeds.get(self.style.index()) {
             Some(Some((m, x))) => (m, x),
             _ => (&self.seed_motion, &self.seed_music),
@@ -312,11 +312,27 @@ impl NeuralDancer {
                 &seed_music[f * FEATURE_DIM..(f + 1) * FEATURE_DIM],
                 None,
             );
-            self.runtime.push(&self.token);
+            push_guided(
+                &mut self.runtime,
+                self.plain.as_mut(),
+                &self.token,
+                self.style_strength,
+            );
         }
         self.previous
             .copy_from_slice(&seed_motion[(n - 1) * MOTION_FEATURE_DIM..]);
         self.norm.unpose(&self.previous, &mut self.previous_raw);
+    }
+
+    /// Sets how strongly the style steers the dance: 1 as trained (the default), 0 not at
+    /// all, above 1 exaggerated (non-finite or negative: 1). A model without a style input
+    /// ignores it.
+    pub fn set_style_strength(&mut self, strength: f32) {
+        self.style_strength = if strength.is_finite() && strength >= 0.0 {
+            strength
+        } else {
+            1.0
+        };
     }
 
     /// Retimes the raw `features` of the next frame within the beat (`beat_cos`: cosine of the
@@ -417,17 +433,25 @@ impl MotionSource for NeuralDancer {
             self.norm.key(&self.key_raw, &mut self.key);
             k.frames_to_go
         });
+        if self.overlay.at_rest() {
+            self.route_now = controls.key_route.unwrap_or(self.key_route);
+        }
         self.overlay.read_cue(controls.key_pose.as_ref());
         let overlay = self.nets.key_blend
             && self.key_blend_frames > 0
-            && self.key_route == KeyPoseRoute::Overlay;
+            && self.route_now == KeyPoseRoute::Overlay;
         token::fill(
             &mut self.token,
             &self.previous,
             &self.music,
             key.filter(|_| !overlay).map(|f| (&self.key[..], f)),
         );
-        self.runtime.push(&self.token);
+        push_guided(
+            &mut self.runtime,
+            self.plain.as_mut(),
+            &self.token,
+            self.style_strength,
+        );
         let t = finite_clamp(controls.temperature, 0.0, f32::INFINITY);
         let rho = self.noise_correlation;
         let fresh = (1.0 - rho * rho).sqrt();
@@ -580,6 +604,10 @@ impl MotionSource for NeuralDancer {
         self.has_style_input().then_some(self.style)
     }
 
+    fn key_route(&self) -> Option<KeyPoseRoute> {
+        Some(self.route_now)
+    }
+
     fn reseed(&mut self, seed: u64) {
         // The correlated noise carries on from its current value, so the pose glides.
         self.rng = Rng::new(seed);
@@ -630,7 +658,7 @@ mod tests {
     use super::*;
     use crate::neural::config::NetConfig;
     use crate::neural::file::TrainingSummary;
-    use crate::neural::tensors::init_net;
+    use crate::neural::tensors::{STYLE_EMBEDDING, init_net};
     use crate::source::KeyPoseTarget;
     use glam::Quat;
 
@@ -734,6 +762,109 @@ mod tests {
         let a = styled_run(&mut old, StyleRequest::Style(DanceStyle::ChaCha));
         let b = styled_run(&mut old, StyleRequest::Style(DanceStyle::Rumba));
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn a_key_route_asked_for_live_takes_over_once_no_key_is_pending() {
+        let music = vec![[0.1f32; FEATURE_DIM]; 3];
+        let key = |frames_to_go| {
+            Some(KeyPoseTarget {
+                rotations: [Quat::from_rotation_x(0.8); 22],
+                frames_to_go,
+            })
+        };
+        // Frames 0..20 a key due at frame 19, then none; the network route asked for from
+        // frame 10 (halfway to the key), or `from` on.
+        let run = |d: &mut NeuralDancer, from: usize| {
+            d.reset(5);
+            let mut pose = Pose::rest();
+            let mut routes = Vec::new();
+            let mut poses = Vec::new();
+            for i in 0..100 {
+                let controls = Controls {
+                    temperature: 0.5,
+                    key_pose: if i < 20 { key(19 - i as u32) } else { None },
+                    key_route: (i >= from).then_some(KeyPoseRoute::Network),
+                    ..Controls::default()
+                };
+                d.step(&music, &controls, &mut pose);
+                routes.push(d.key_route().unwrap());
+                poses.push(pose);
+            }
+            (routes, poses)
+        };
+        let mut d = dancer(0.05);
+        let (routes, live) = run(&mut d, 10);
+        // The key asked for under the overlay keeps it, and so does its let-go.
+        let switched = routes
+            .iter()
+            .position(|r| *r == KeyPoseRoute::Network)
+            .unwrap();
+        assert!(
+            routes[..switched]
+                .iter()
+                .all(|r| *r == KeyPoseRoute::Overlay)
+        );
+        assert_eq!(switched, 20 + KEY_RELEASE_FRAMES as usize - 1, "{routes:?}");
+        assert!(
+            routes[switched..]
+                .iter()
+                .all(|r| *r == KeyPoseRoute::Network)
+        );
+        // The same dance as a route asked for only once the let-go is over.
+        let (_, later) = run(&mut d, switched);
+        assert_eq!(live, later);
+        // At rest, the route takes over at once: a key then goes to the network.
+        let (routes, from_start) = run(&mut d, 0);
+        assert!(routes.iter().all(|r| *r == KeyPoseRoute::Network));
+        let mut set_up = dancer(0.05);
+        set_up.set_key_pose_route(KeyPoseRoute::Network);
+        let (_, network) = run(&mut set_up, usize::MAX);
+        assert_eq!(from_start, network);
+        assert_ne!(from_start, live);
+    }
+
+    /// Summed angle between two runs' joint rotations, radians.
+    fn rotation_gap(a: &[Pose], b: &[Pose]) -> f32 {
+        a.iter()
+            .zip(b)
+            .flat_map(|(p, q)| p.local_rotations.iter().zip(&q.local_rotations))
+            .map(|(r, s)| r.angle_between(*s))
+            .sum()
+    }
+
+    #[test]
+    fn the_style_strength_scales_how_far_the_style_moves_the_dance() {
+        let c = NetConfig::tiny();
+        let mut tensors = init_net(&c, 1);
+        tensors.perturb(2, 0.05);
+        let mut model = NeuralModel {
+            config: c,
+            tensors,
+            training: TrainingSummary::default(),
+        };
+        let cha = StyleRequest::Style(DanceStyle::ChaCha);
+        let mut d = NeuralDancer::new(&model).unwrap();
+        let as_trained = styled_run(&mut d, cha);
+        d.set_style_strength(f32::NAN);
+        assert_eq!(styled_run(&mut d, cha), as_trained, "NaN is not taken");
+        d.set_style_strength(0.0);
+        let off = styled_run(&mut d, cha);
+        d.set_style_strength(2.0);
+        let strong = styled_run(&mut d, cha);
+        // Strength 0 is the network with every style row zero: no style at all.
+        let rows = c.styles * c.d_model;
+        model
+            .tensors
+            .insert(STYLE_EMBEDDING, &[c.styles, c.d_model], vec![0.0; rows]);
+        let unconditioned = styled_run(&mut NeuralDancer::new(&model).unwrap(), cha);
+        assert_eq!(off, unconditioned);
+        let (one, two) = (
+            rotation_gap(&as_trained, &unconditioned),
+            rotation_gap(&strong, &unconditioned),
+        );
+        assert!(one > 0.0 && two > 1.5 * one, "gap at 1: {one}, at 2: {two}");
+        assert!(strong.iter().all(|p| p.is_finite()));
     }
 
     #[test]

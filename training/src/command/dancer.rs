@@ -19,7 +19,7 @@ use model::neural::token::{MUSIC_AT, Normalizer, TOKEN_DIM};
 use crate::net::{FreeRun, InputPath};
 use crate::train::{
     Batch, Corpus, CriticTerm, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
-    add_level_to_flow,
+    add_level_to_flow, add_style_input,
 };
 use crate::weight_average::WeightAverage;
 
@@ -153,8 +153,9 @@ pub struct TrainArgs {
     /// Train only the weights that read these inputs of the resumed model: `key` (the
     /// embedding's and the flow couplings' rows for the key pose, its count-down and flag:
     /// with no key pending the network dances exactly as the resumed model does, so the
-    /// key-pose loss cannot cost the free dancing) or `music` (the embedding's rows for the
-    /// music features).
+    /// key-pose loss cannot cost the free dancing), `music` (the embedding's rows for the
+    /// music features), `relative-level` (its embedding row, and the flow's with
+    /// `--level-to-flow`) or `style` (the style embedding; see `--add-style`).
     #[arg(long, value_enum, value_name = "INPUTS", requires = "resume")]
     pub train_only: Option<InputPath>,
     /// Temperature of the key-pose rollouts' samples.
@@ -172,6 +173,10 @@ pub struct TrainArgs {
     /// Build a network without a style input (the architecture before issue 21).
     #[arg(long)]
     pub no_style: bool,
+    /// Give a resumed network built without a style input one, its rows at zero: the same
+    /// dancer, with or without a style, until trained (e.g. `--train-only style`).
+    #[arg(long, requires = "resume", conflicts_with = "no_style")]
+    pub add_style: bool,
     /// Build a network whose flow also reads the key pose's distance from the previous pose
     /// and the count-down directly (beside the transformer's context), so a key pose can
     /// steer the next pose without passing through attention. With `--resume` of a network
@@ -482,6 +487,13 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     path.display()
                 );
             }
+            if args.add_style && model.config.styles == 0 {
+                add_style_input(&mut model);
+                eprintln!(
+                    "{}: it now has a style input (rows zero: the same dancer until trained)",
+                    path.display()
+                );
+            }
             if args.level_to_flow && !model.config.level_to_flow {
                 add_level_to_flow(&mut model).with_context(|| {
                     format!("giving {}'s flow the relative level", path.display())
@@ -662,6 +674,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         } else {
             ""
         }
+        + if args.add_style { " --add-style" } else { "" }
         + if args.level_to_flow {
             " --level-to-flow"
         } else {
