@@ -22,6 +22,9 @@ pub struct BenchModelArgs {
     /// Sampling temperature.
     #[arg(long, default_value_t = 1.0)]
     pub temperature: f32,
+    /// Key strength of the dancer timed (other than 1: a second pass of the network).
+    #[arg(long, default_value_t = 1.0)]
+    pub key_strength: f32,
 }
 
 /// Music frames of the built-in demo song (30 s) at the dancer's rate: what the timed frames
@@ -90,6 +93,7 @@ pub fn time_frames(
 pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
     let model = crate::dancer::load_model(args.model.as_deref())?;
     let mut dancer = NeuralDancer::new(&model)?;
+    dancer.set_key_strength(args.key_strength);
     let song = demo_music(dancer.frame_rate())?;
     // Where the first frame lands, to diagnose held frames.
     dancer.reset(1);

@@ -47,6 +47,10 @@ pub struct EvalArgs {
     /// trained, 0 unconditioned, above 1 exaggerated).
     #[arg(long, default_value_t = 1.0)]
     pub style_strength: f32,
+    /// How strongly a key handed to the network steers it in the neural rows (1 as trained,
+    /// above 1 exaggerated; the network then runs a second pass without the key).
+    #[arg(long, default_value_t = 1.0)]
+    pub key_strength: f32,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -65,13 +69,14 @@ fn ablation(name: &str) -> bool {
     [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name)
 }
 
-/// The neural dancer on `model`, seeded and steered by the options.
-fn neural_dancer(
+/// The neural dancer on `model`, seeded and steered (style and key strength) by the options.
+fn eval_dancer(
     o: &EvalArgs,
     model: &model::neural::file::NeuralModel,
 ) -> Result<model::neural::dancer::NeuralDancer> {
     let mut d = crate::dancer::neural_dancer(model, o.seed)?;
     d.set_style_strength(o.style_strength);
+    d.set_key_strength(o.key_strength);
     Ok(d)
 }
 
@@ -95,22 +100,22 @@ fn sources(
     for (name, lib) in libraries {
         sources.push((name.to_string(), Box::new(crate::eval::retrieval(lib)?)));
     }
-    sources.push(("neural".into(), Box::new(neural_dancer(o, model)?)));
+    sources.push(("neural".into(), Box::new(eval_dancer(o, model)?)));
     // Ablations: the network's own timing, a fresh noise draw every frame, free feet.
-    let mut own_timing = neural_dancer(o, model)?;
+    let mut own_timing = eval_dancer(o, model)?;
     own_timing.set_beat_accent(0.0);
     sources.push((NO_ACCENT.into(), Box::new(own_timing)));
-    let mut fresh_noise = neural_dancer(o, model)?;
+    let mut fresh_noise = eval_dancer(o, model)?;
     fresh_noise.set_noise_correlation(0.0);
     sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
-    let mut free_feet = neural_dancer(o, model)?;
+    let mut free_feet = eval_dancer(o, model)?;
     free_feet.set_safety_nets(model::neural::safety::SafetyNets {
         foot_lock: false,
         ..model::neural::safety::SafetyNets::SHIPPED
     });
     sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
     // The network alone: every safety net off but the non-finite guard.
-    let mut alone = neural_dancer(o, model)?;
+    let mut alone = eval_dancer(o, model)?;
     alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
     sources.push((NETWORK_ONLY.into(), Box::new(alone)));
     Ok(sources)
@@ -126,7 +131,7 @@ fn training_songs_table(o: &EvalArgs, temperatures: &[f32], started: Instant) ->
         started.elapsed().as_secs_f64()
     );
     let model = crate::dancer::load_model(o.model.as_deref())?;
-    let mut dancer = neural_dancer(o, &model)?;
+    let mut dancer = eval_dancer(o, &model)?;
     let mut rows = vec![set.score("ground truth, training dances", &set.ground_truth())?];
     for &t in temperatures {
         let (motions, _) = set.generate(&mut dancer, t, o.seed);
@@ -209,9 +214,9 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
         }
     }
     // With each style requested in turn on every song (models with a style input).
-    let probe = neural_dancer(o, &model)?;
+    let probe = eval_dancer(o, &model)?;
     if probe.has_style_input() {
-        let mut alone = neural_dancer(o, &model)?;
+        let mut alone = eval_dancer(o, &model)?;
         alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
         for (label, mut dancer) in [
             ("neural T=0.5", probe),
@@ -281,7 +286,7 @@ fn key_tables(
     key_table += " | cues |\n| --- |";
     key_table += &" --- |".repeat(KEY_HORIZONS_S.len() + 1);
     key_table += "\n";
-    let mut unaided = neural_dancer(o, model)?;
+    let mut unaided = eval_dancer(o, model)?;
     unaided.set_key_blend_frames(0);
     let unaided_name = "neural without the final blend".to_string();
     for (name, dancer) in sources
@@ -308,7 +313,7 @@ fn key_tables(
         "\n| system | FID_k of the {s} s before key poses ↓ | of the {s} s after them ↓ | of the same windows danced free ↓ | before / free (target ≤ 1.25) | after / free | joint speed before / free, m/s | windows |\n| --- | --- | --- | --- | --- | --- | --- | --- |",
         s = crate::eval::TRANSITION_S
     );
-    let mut led = neural_dancer(o, model)?;
+    let mut led = eval_dancer(o, model)?;
     led.set_key_pose_route(model::source::KeyPoseRoute::Network);
     let led_name = "neural, key to the network".to_string();
     for (name, dancer) in sources

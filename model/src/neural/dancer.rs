@@ -74,12 +74,19 @@ pub const RESTART_AFTER_HELD: u32 = 4;
 /// Frames over which the pose glides from where the dancer stood to the restarted motion.
 pub const RESTART_BLEND_FRAMES: u32 = 10;
 
-/// Pushes `token` through `runtime` and its unconditioned twin `plain` (which keeps the same
-/// past, so the style can be steered at any frame), steering `runtime` by `strength`.
-fn push_guided(runtime: &mut Runtime, plain: Option<&mut Runtime>, token: &[f32], strength: f32) {
+/// Pushes `token` through `runtime` and `plain_token` (the same without its key) through the
+/// unconditioned twin `plain` (which keeps the same past, so the dance can be steered at any
+/// frame), steering `runtime` by `strength`.
+fn push_guided(
+    runtime: &mut Runtime,
+    plain: Option<&mut Runtime>,
+    token: &[f32],
+    plain_token: &[f32],
+    strength: f32,
+) {
     runtime.push(token);
     if let Some(plain) = plain {
-        plain.push(token);
+        plain.push(plain_token);
         if strength != 1.0 {
             runtime.guide(plain, strength);
         }
@@ -89,11 +96,16 @@ fn push_guided(runtime: &mut Runtime, plain: Option<&mut Runtime>, token: &[f32]
 /// The neural motion source.
 pub struct NeuralDancer {
     runtime: Runtime,
-    /// The same network fed the same tokens without a style, for a model with a style input
-    /// (the reference [`Runtime::guide`] steers from).
+    /// The same network fed the same tokens without a style or a key, for a model with a
+    /// style input or a key strength other than 1 (the reference [`Runtime::guide`] steers
+    /// from).
     plain: Option<Runtime>,
     /// How strongly the style steers the dance (1: as trained).
     style_strength: f32,
+    /// How strongly a key handed to the network steers it (1: as trained).
+    key_strength: f32,
+    /// This frame's token without its key, for `plain`.
+    plain_token: Vec<f32>,
     norm: Normalizer,
     seed_motion: Vec<f32>,
     /// Per style (by index), its own seed clip, normalised (motion, music); empty for a model
@@ -188,6 +200,8 @@ impl NeuralDancer {
             runtime,
             plain,
             style_strength: 1.0,
+            key_strength: 1.0,
+            plain_token: vec![0.0; TOKEN_DIM],
             norm,
             low,
             high,
@@ -316,6 +330,7 @@ impl NeuralDancer {
                 &mut self.runtime,
                 self.plain.as_mut(),
                 &self.token,
+                &self.token,
                 self.style_strength,
             );
         }
@@ -333,6 +348,25 @@ impl NeuralDancer {
         } else {
             1.0
         };
+    }
+
+    /// Sets how strongly a key pose handed to the network (the network route, or the end
+    /// blend off) steers it: 1 as trained (the default), 0 through the flow's own key input
+    /// alone, above 1 exaggerated (non-finite or negative: 1). While a key is pending this
+    /// strength steers instead of the style's. Other than 1, every frame also runs the
+    /// network without the key, a second transformer pass; set it before dancing (it sets up
+    /// that second pass, from where the dancer stands).
+    pub fn set_key_strength(&mut self, strength: f32) {
+        self.key_strength = if strength.is_finite() && strength >= 0.0 {
+            strength
+        } else {
+            1.0
+        };
+        if self.key_strength != 1.0 && self.plain.is_none() {
+            let mut plain = self.runtime.clone();
+            plain.set_style(None);
+            self.plain = Some(plain);
+        }
     }
 
     /// Retimes the raw `features` of the next frame within the beat (`beat_cos`: cosine of the
@@ -446,11 +480,18 @@ impl MotionSource for NeuralDancer {
             &self.music,
             key.filter(|_| !overlay).map(|f| (&self.key[..], f)),
         );
+        let keyed = self.token[token::FLAG_AT] > 0.0;
+        token::fill(&mut self.plain_token, &self.previous, &self.music, None);
         push_guided(
             &mut self.runtime,
             self.plain.as_mut(),
             &self.token,
-            self.style_strength,
+            &self.plain_token,
+            if keyed {
+                self.key_strength
+            } else {
+                self.style_strength
+            },
         );
         let t = finite_clamp(controls.temperature, 0.0, f32::INFINITY);
         let rho = self.noise_correlation;
@@ -822,6 +863,67 @@ mod tests {
         let (_, network) = run(&mut set_up, usize::MAX);
         assert_eq!(from_start, network);
         assert_ne!(from_start, live);
+    }
+
+    #[test]
+    fn the_key_strength_steers_only_while_a_key_is_pending() {
+        let music = vec![[0.1f32; FEATURE_DIM]; 3];
+        // A key due at frame 39, announced from frame 20, handed to the network.
+        let run = |d: &mut NeuralDancer| {
+            d.reset(5);
+            let mut pose = Pose::rest();
+            (0..60)
+                .map(|i| {
+                    let controls = Controls {
+                        temperature: 0.5,
+                        key_pose: (20..40).contains(&i).then(|| KeyPoseTarget {
+                            rotations: [Quat::from_rotation_x(0.8); 22],
+                            frames_to_go: 39 - i as u32,
+                        }),
+                        ..Controls::default()
+                    };
+                    d.step(&music, &controls, &mut pose);
+                    pose
+                })
+                .collect::<Vec<Pose>>()
+        };
+        // With a style input (its unconditioned pass already there) and without (the key
+        // strength sets one up).
+        for styles in [4, 0] {
+            let c = NetConfig {
+                styles,
+                ..NetConfig::tiny()
+            };
+            let mut tensors = init_net(&c, 1);
+            tensors.perturb(2, 0.05);
+            let mut d = NeuralDancer::new(&NeuralModel {
+                config: c,
+                tensors,
+                training: TrainingSummary::default(),
+            })
+            .unwrap();
+            d.set_key_pose_route(KeyPoseRoute::Network);
+            let as_trained = run(&mut d);
+            d.set_key_strength(1.0);
+            assert_eq!(run(&mut d), as_trained);
+            d.set_key_strength(2.5);
+            let steered = run(&mut d);
+            assert_eq!(
+                steered[..20],
+                as_trained[..20],
+                "no key yet: the same dance"
+            );
+            assert!(
+                rotation_gap(&steered[20..40], &as_trained[20..40]) > 0.0,
+                "the key is steered ({styles} styles)"
+            );
+            assert!(steered.iter().all(|p| p.is_finite()));
+        }
+        // Shown over the dance, the key never reaches the network: nothing to steer.
+        let mut shown = dancer(0.05);
+        let overlay = run(&mut shown);
+        shown.set_key_strength(2.5);
+        assert_eq!(run(&mut shown), overlay);
     }
 
     /// Summed angle between two runs' joint rotations, radians.

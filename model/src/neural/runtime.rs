@@ -9,6 +9,7 @@ use crate::neural::lu;
 use crate::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
 use crate::neural::token::{FLAG_AT, LEVEL_AT, key_condition};
 
+#[derive(Clone)]
 struct Dense {
     w: Vec<f32>,
     b: Vec<f32>,
@@ -36,6 +37,7 @@ impl Dense {
     }
 }
 
+#[derive(Clone)]
 struct Norm {
     g: Vec<f32>,
     b: Vec<f32>,
@@ -60,6 +62,7 @@ impl Norm {
     }
 }
 
+#[derive(Clone)]
 struct Block {
     ln1: Norm,
     qkv: Dense,
@@ -72,6 +75,7 @@ struct Block {
     values: Vec<f32>,
 }
 
+#[derive(Clone)]
 struct FlowStep {
     an_bias: Vec<f32>,
     /// exp(−actnorm log-scale), precomputed.
@@ -83,6 +87,7 @@ struct FlowStep {
 }
 
 /// The streaming network.
+#[derive(Clone)]
 pub struct Runtime {
     config: NetConfig,
     embed: Dense,
