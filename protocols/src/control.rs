@@ -263,27 +263,9 @@ impl ControlParser {
                     _ => ControlEvent::ClearKeyPose,
                 }
             }
-            "/style" => {
-                let name = match args.as_slice() {
-                    [OscType::String(s)] if !s.trim().is_empty() => s.trim().to_lowercase(),
-                    [a] => match as_int(a)? {
-                        n @ 0..=4 => STYLE_NUMBERS[n as usize].to_string(),
-                        _ => return Err(Reject::BadArguments),
-                    },
-                    _ => return Err(Reject::BadArguments),
-                };
-                ControlEvent::DanceStyle(name)
-            }
+            "/style" => ControlEvent::DanceStyle(name_or_number(args, &STYLE_NUMBERS)?),
             "/keypose/route" => {
-                let name = match args.as_slice() {
-                    [OscType::String(s)] if !s.trim().is_empty() => s.trim().to_lowercase(),
-                    [a] => match as_int(a)? {
-                        n @ 0..=1 => KEY_ROUTE_NUMBERS[n as usize].to_string(),
-                        _ => return Err(Reject::BadArguments),
-                    },
-                    _ => return Err(Reject::BadArguments),
-                };
-                ControlEvent::KeyPoseRoute(name)
+                ControlEvent::KeyPoseRoute(name_or_number(args, &KEY_ROUTE_NUMBERS)?)
             }
             "/transition" => {
                 let beats = one_float(args)?;
@@ -309,6 +291,20 @@ impl ControlParser {
         };
         out.push(event);
         Ok(())
+    }
+}
+
+/// The single argument as a name (trimmed, lower-cased; resolved by the receiver) or a number
+/// N naming `numbers[N]`.
+fn name_or_number(args: &[OscType], numbers: &[&str]) -> Result<String, Reject> {
+    match args {
+        [OscType::String(s)] if !s.trim().is_empty() => Ok(s.trim().to_lowercase()),
+        [a] => usize::try_from(as_int(a)?)
+            .ok()
+            .and_then(|n| numbers.get(n))
+            .map(|name| name.to_string())
+            .ok_or(Reject::BadArguments),
+        _ => Err(Reject::BadArguments),
     }
 }
 

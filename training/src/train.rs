@@ -1155,7 +1155,14 @@ mod tests {
     /// A fresh tiny trainer initialised on [`periodic_dance`] (of style `style`), the corpus
     /// of its 2-window sequences, and the generator as the initialisation left it.
     fn periodic_trainer(style: Option<usize>) -> (NetConfig, Corpus, Trainer, Rng) {
-        let c = NetConfig::tiny();
+        periodic_trainer_of(NetConfig::tiny(), style)
+    }
+
+    /// [`periodic_trainer`] of a network of config `c`.
+    fn periodic_trainer_of(
+        c: NetConfig,
+        style: Option<usize>,
+    ) -> (NetConfig, Corpus, Trainer, Rng) {
         let (motion, music) = periodic_dance();
         let norm = Normalizer::fit(&motion, &music);
         let corpus = Corpus::new(&[(&motion[..], &music[..], style)], &norm, &c, 2 * c.window);
@@ -1581,12 +1588,7 @@ mod tests {
             styles: 0,
             ..NetConfig::tiny()
         };
-        let (motion, music) = periodic_dance();
-        let norm = Normalizer::fit(&motion, &music);
-        let plain = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
-        let mut tr = fresh_trainer(c, &norm);
-        let mut rng = Rng::new(2);
-        tr.data_init(&plain.random_batch(&mut rng, 8, 0.5));
+        let (_, plain, mut tr, mut rng) = periodic_trainer_of(c, None);
         for _ in 0..30 {
             tr.step(&plain.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
         }
@@ -1610,6 +1612,8 @@ mod tests {
         }
         // Trained on a dance of style 1, only that style's row moves.
         let c = start.config;
+        let (motion, music) = periodic_dance();
+        let norm = Normalizer::fit(&motion, &music);
         let styled = Corpus::new(
             &[(&motion[..], &music[..], Some(1))],
             &norm,
