@@ -1175,6 +1175,23 @@ mod tests {
     /// A rebuild of a network's flow inputs ([`add_key_to_flow`], [`add_level_to_flow`]).
     type Widen = fn(&mut NeuralModel) -> Result<(), WeightError>;
 
+    /// Feeds `before` and `after` the same 12 random tokens (a key pending from token
+    /// `key_from` on) and checks that they sample alike from the same noise.
+    fn assert_sample_alike(before: &mut Runtime, after: &mut Runtime, key_from: usize) {
+        let mut r = Rng::new(3);
+        let (mut a, mut b) = (vec![0.0; P], vec![0.0; P]);
+        for i in 0..12 {
+            let mut tok: Vec<f32> = (0..TOKEN_DIM).map(|_| r.normal()).collect();
+            tok[token::FLAG_AT] = f32::from(u8::from(i >= key_from));
+            before.push(&tok);
+            after.push(&tok);
+            let z: Vec<f32> = (0..P).map(|_| r.normal()).collect();
+            before.sample(&z, &mut a);
+            after.sample(&z, &mut b);
+            assert_eq!(a, b, "token {i}");
+        }
+    }
+
     /// Builds a perturbed tiny network of config `c`, widens its flow with `widen`, and
     /// checks that the runtime samples every step as before (keys pending from token 5); the
     /// widened config.
@@ -1190,18 +1207,7 @@ mod tests {
         widen(&mut model).unwrap();
         assert!(model.config.flow().context > c.flow().context);
         let mut after = Runtime::new(&model.tensors, &model.config).unwrap();
-        let mut r = Rng::new(3);
-        let (mut a, mut b) = (vec![0.0; P], vec![0.0; P]);
-        for i in 0..12 {
-            let mut tok: Vec<f32> = (0..TOKEN_DIM).map(|_| r.normal()).collect();
-            tok[token::FLAG_AT] = f32::from(u8::from(i > 4));
-            before.push(&tok);
-            after.push(&tok);
-            let z: Vec<f32> = (0..P).map(|_| r.normal()).collect();
-            before.sample(&z, &mut a);
-            after.sample(&z, &mut b);
-            assert_eq!(a, b, "token {i}");
-        }
+        assert_sample_alike(&mut before, &mut after, 5);
         // The new inputs are trainable weights like the others: the rebuilt network loads.
         assert!(Net::load(&model.tensors, &model.config, &cpu_device()).is_ok());
         model.config
@@ -1599,17 +1605,7 @@ mod tests {
         // Unconditioned or not, it dances as before until trained.
         let mut after = Runtime::new(&start.tensors, &start.config).unwrap();
         after.set_style(Some(1));
-        let mut r = Rng::new(3);
-        let (mut a, mut b) = (vec![0.0; P], vec![0.0; P]);
-        for i in 0..12 {
-            let tok: Vec<f32> = (0..TOKEN_DIM).map(|_| r.normal()).collect();
-            before.push(&tok);
-            after.push(&tok);
-            let z: Vec<f32> = (0..P).map(|_| r.normal()).collect();
-            before.sample(&z, &mut a);
-            after.sample(&z, &mut b);
-            assert_eq!(a, b, "token {i}");
-        }
+        assert_sample_alike(&mut before, &mut after, 5);
         // Trained on a dance of style 1, only that style's row moves.
         let c = start.config;
         let (motion, music) = periodic_dance();
