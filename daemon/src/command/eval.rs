@@ -51,6 +51,10 @@ pub struct EvalArgs {
     /// above 1 exaggerated; the network then runs a second pass without the key).
     #[arg(long, default_value_t = 1.0)]
     pub key_strength: f32,
+    /// Frames over which the neural rows blend a key pose in before its deadline (the end
+    /// blend; the rows without it stay without it).
+    #[arg(long, default_value_t = model::neural::dancer::KEY_BLEND_FRAMES)]
+    pub key_blend_frames: u32,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -69,7 +73,8 @@ fn ablation(name: &str) -> bool {
     [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name)
 }
 
-/// The neural dancer on `model`, seeded and steered (style and key strength) by the options.
+/// The neural dancer on `model`, seeded, steered (style and key strength) and blending keys
+/// in as the options say.
 fn eval_dancer(
     o: &EvalArgs,
     model: &model::neural::file::NeuralModel,
@@ -77,6 +82,7 @@ fn eval_dancer(
     let mut d = crate::dancer::neural_dancer(model, o.seed)?;
     d.set_style_strength(o.style_strength);
     d.set_key_strength(o.key_strength);
+    d.set_key_blend_frames(o.key_blend_frames);
     Ok(d)
 }
 
