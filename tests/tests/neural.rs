@@ -272,3 +272,45 @@ fn switching_styles_with_their_own_seed_clips_does_not_allocate() {
     assert!(switches >= 8, "{switches} style changes");
     assert!(pose.is_finite());
 }
+
+#[test]
+fn steering_by_style_and_key_does_not_allocate() {
+    use model::neural::config::NetConfig;
+    use model::neural::file::{NeuralModel, TrainingSummary};
+    use model::source::{KeyPoseRoute, KeyPoseTarget};
+    use model::style::{DanceStyle, StyleRequest};
+    // A network with a style input, steered by its style and by a key handed to it: each
+    // frame runs the network twice and moves the context between the two passes.
+    let config = NetConfig::tiny();
+    let model = NeuralModel {
+        config,
+        tensors: model::neural::tensors::init_net(&config, 3),
+        training: TrainingSummary::default(),
+    };
+    let mut dancer = NeuralDancer::new(&model).unwrap();
+    dancer.set_style_strength(2.0);
+    dancer.set_key_strength(2.5);
+    dancer.set_key_pose_route(KeyPoseRoute::Network);
+    let (music, _) = common::demo_music(8.0, 25.0);
+    let look = dancer.lookahead_frames();
+    let rotations = Pose::rest().local_rotations;
+    let mut pose = Pose::rest();
+    let _alone = ALLOCATION_PROOF.lock().unwrap_or_else(|e| e.into_inner());
+    let before = daemon::alloc_counter::callback_allocations();
+    daemon::alloc_counter::in_callback(|| {
+        for i in 0..music.len() - look {
+            let controls = Controls {
+                temperature: 0.5,
+                key_pose: (i % 60 > 30).then_some(KeyPoseTarget {
+                    rotations,
+                    frames_to_go: (60 - i % 60) as u32,
+                }),
+                style: StyleRequest::Style(DanceStyle::ALL[i % 200 / 50]),
+                ..Controls::default()
+            };
+            dancer.step(&music[i..=i + look], &controls, &mut pose);
+        }
+    });
+    assert_eq!(daemon::alloc_counter::callback_allocations() - before, 0);
+    assert!(pose.is_finite());
+}
