@@ -343,11 +343,7 @@ impl NeuralDancer {
     /// all, above 1 exaggerated (non-finite or negative: 1). A model without a style input
     /// ignores it.
     pub fn set_style_strength(&mut self, strength: f32) {
-        self.style_strength = if strength.is_finite() && strength >= 0.0 {
-            strength
-        } else {
-            1.0
-        };
+        self.style_strength = strength_or_one(strength);
     }
 
     /// Sets how strongly a key pose handed to the network (the network route, or the end
@@ -357,11 +353,7 @@ impl NeuralDancer {
     /// network without the key, a second transformer pass; set it before dancing (it sets up
     /// that second pass, from where the dancer stands).
     pub fn set_key_strength(&mut self, strength: f32) {
-        self.key_strength = if strength.is_finite() && strength >= 0.0 {
-            strength
-        } else {
-            1.0
-        };
+        self.key_strength = strength_or_one(strength);
         if self.key_strength != 1.0 && self.plain.is_none() {
             let mut plain = self.runtime.clone();
             plain.set_style(None);
@@ -481,12 +473,18 @@ impl MotionSource for NeuralDancer {
             key.filter(|_| !overlay).map(|f| (&self.key[..], f)),
         );
         let keyed = self.token[token::FLAG_AT] > 0.0;
-        token::fill(&mut self.plain_token, &self.previous, &self.music, None);
+        // Only a second pass reads the token without its key, and only a keyed one differs.
+        let plain_token = if keyed && self.plain.is_some() {
+            token::fill(&mut self.plain_token, &self.previous, &self.music, None);
+            &self.plain_token
+        } else {
+            &self.token
+        };
         push_guided(
             &mut self.runtime,
             self.plain.as_mut(),
             &self.token,
-            &self.plain_token,
+            plain_token,
             if keyed {
                 self.key_strength
             } else {
@@ -675,6 +673,15 @@ fn normalised_clip(norm: &Normalizer, motion: &[f32], music: &[f32]) -> (Vec<f32
 }
 
 /// A beat accent depth in [0, 0.9] (non-finite: 0).
+/// A guidance strength as given, or 1 (as trained) where it is not finite or negative.
+fn strength_or_one(strength: f32) -> f32 {
+    if strength.is_finite() && strength >= 0.0 {
+        strength
+    } else {
+        1.0
+    }
+}
+
 fn clean_accent(depth: f32) -> f32 {
     finite_clamp(depth, 0.0, 0.9)
 }
