@@ -42,6 +42,22 @@ pub enum KeyPoseRoute {
 }
 
 impl KeyPoseRoute {
+    /// Every route, in the order `/keypose/route N` numbers them.
+    pub const ALL: [KeyPoseRoute; 2] = [KeyPoseRoute::Overlay, KeyPoseRoute::Network];
+
+    /// Its index in [`Self::ALL`].
+    pub fn index(self) -> usize {
+        match self {
+            KeyPoseRoute::Overlay => 0,
+            KeyPoseRoute::Network => 1,
+        }
+    }
+
+    /// The route at `index` of [`Self::ALL`].
+    pub fn from_index(index: usize) -> Option<Self> {
+        Self::ALL.get(index).copied()
+    }
+
     /// The route named `s` (`overlay` or `network`, case-insensitive).
     pub fn parse(s: &str) -> Option<Self> {
         match s.trim().to_ascii_lowercase().as_str() {

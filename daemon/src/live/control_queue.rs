@@ -96,23 +96,8 @@ struct Params {
     seed: ParamSlot,
     /// 0 = auto, 1 + index = that [`DanceStyle`].
     style: ParamSlot,
-    /// [`route_bits`].
+    /// The [`KeyPoseRoute`]'s index.
     key_route: ParamSlot,
-}
-
-fn route_bits(route: KeyPoseRoute) -> u64 {
-    match route {
-        KeyPoseRoute::Overlay => 0,
-        KeyPoseRoute::Network => 1,
-    }
-}
-
-fn route_of_bits(bits: u64) -> KeyPoseRoute {
-    if bits == 1 {
-        KeyPoseRoute::Network
-    } else {
-        KeyPoseRoute::Overlay
-    }
 }
 
 fn style_bits(request: StyleRequest) -> u64 {
@@ -324,7 +309,7 @@ impl ControlSender {
             }
             ControlEvent::KeyPoseRoute(name) => {
                 let route = KeyPoseRoute::parse(&name).ok_or(ControlRefusal::OutOfRange)?;
-                self.offer(&p.key_route, route_bits(route));
+                self.offer(&p.key_route, route.index() as u64);
                 return Ok(());
             }
             ControlEvent::KeyPose { name, quantize } => {
@@ -377,7 +362,8 @@ impl ControlReceiver {
             apply(MotionCommand::DanceStyle(style_of_bits(bits)));
         }
         if let Some(bits) = p.key_route.take() {
-            apply(MotionCommand::KeyPoseRoute(route_of_bits(bits)));
+            let route = KeyPoseRoute::from_index(bits as usize).unwrap_or(KeyPoseRoute::Overlay);
+            apply(MotionCommand::KeyPoseRoute(route));
         }
         for c in &mut self.consumers {
             while let Ok(command) = c.pop() {
@@ -516,6 +502,12 @@ mod tests {
         );
         assert_eq!(stats.controls_coalesced.load(Ordering::Relaxed), 1);
         assert!(drain(&mut rx).is_empty());
+        // `/keypose/route N` and the slot number routes alike.
+        for (i, name) in protocols::control::KEY_ROUTE_NUMBERS.iter().enumerate() {
+            let route = KeyPoseRoute::parse(name).unwrap();
+            assert_eq!(route.index(), i);
+            assert_eq!(KeyPoseRoute::from_index(i), Some(route));
+        }
     }
 
     #[test]

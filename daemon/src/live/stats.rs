@@ -238,7 +238,7 @@ pub struct Stats {
     pub style: AtomicU32,
     /// 1 while the style is `auto` (chosen from the music), 0 while one is requested.
     pub style_auto: AtomicU32,
-    /// Where key poses go: 0 = the source has no route, 1 = overlay, 2 = network.
+    /// Where key poses go: 0 = the source has no route, 1 + the [`KeyPoseRoute`]'s index.
     pub key_route: AtomicU32,
     /// What the dancer's safety nets did (neural dancer only).
     pub safety: SafetyGauges,
@@ -333,21 +333,15 @@ impl Stats {
 
     /// Records where key poses go (None: the source has no route to choose).
     pub fn set_key_route(&self, route: Option<KeyPoseRoute>) {
-        let v = match route {
-            None => 0,
-            Some(KeyPoseRoute::Overlay) => 1,
-            Some(KeyPoseRoute::Network) => 2,
-        };
+        let v = route.map_or(0, |r| 1 + r.index() as u32);
         self.key_route.store(v, Ordering::Relaxed);
     }
 
     /// Where key poses go, as last recorded.
     pub fn key_route(&self) -> Option<KeyPoseRoute> {
-        match self.key_route.load(Ordering::Relaxed) {
-            1 => Some(KeyPoseRoute::Overlay),
-            2 => Some(KeyPoseRoute::Network),
-            _ => None,
-        }
+        let v = self.key_route.load(Ordering::Relaxed);
+        v.checked_sub(1)
+            .and_then(|i| KeyPoseRoute::from_index(i as usize))
     }
 
     /// The style danced, as last recorded.
