@@ -180,42 +180,60 @@ fn foot_lock_keeps_planted_feet_from_skating() {
     );
 }
 
-#[test]
-fn stepping_the_dancer_does_not_allocate() {
-    let model = daemon::dancer::load_model(None).unwrap();
-    let mut dancer = daemon::dancer::neural_dancer(&model, 5).unwrap();
-    let (music, _) = common::demo_music(12.0, 25.0);
+/// Steps `dancer` over `seconds` of the demo song inside the counted callback (alone among
+/// the allocation proofs), frame i's controls from `controls`: the allocations counted and
+/// the last pose.
+fn allocations_stepping(
+    dancer: &mut NeuralDancer,
+    seconds: f64,
+    controls: impl Fn(usize) -> Controls,
+) -> (u64, Pose) {
+    let (music, _) = common::demo_music(seconds, 25.0);
     let look = dancer.lookahead_frames();
-    let rotations = Pose::rest().local_rotations;
     let mut pose = Pose::rest();
     let _alone = ALLOCATION_PROOF.lock().unwrap_or_else(|e| e.into_inner());
     let before = daemon::alloc_counter::callback_allocations();
     daemon::alloc_counter::in_callback(|| {
         for i in 0..music.len() - look {
-            let controls = Controls {
-                temperature: if i % 100 < 50 { 1.0 } else { 0.3 },
-                key_pose: (i % 60 > 30).then_some(model::source::KeyPoseTarget {
-                    rotations,
-                    frames_to_go: (60 - i % 60) as u32,
-                }),
-                // The accent knob turned live, as a performer would.
-                beat_accent: Some((i % 90) as f32 / 100.0),
-                // And the style switched live, through every style and auto.
-                style: match i % 250 / 50 {
-                    4 => model::style::StyleRequest::Auto,
-                    k => model::style::StyleRequest::Style(model::style::DanceStyle::ALL[k]),
-                },
-                // And the key route switched live.
-                key_route: Some(if i % 400 < 200 {
-                    model::source::KeyPoseRoute::Overlay
-                } else {
-                    model::source::KeyPoseRoute::Network
-                }),
-            };
-            dancer.step(&music[i..=i + look], &controls, &mut pose);
+            dancer.step(&music[i..=i + look], &controls(i), &mut pose);
         }
     });
-    assert_eq!(daemon::alloc_counter::callback_allocations() - before, 0);
+    (daemon::alloc_counter::callback_allocations() - before, pose)
+}
+
+/// The key pose of frame i: the rest pose, pending over the second half of every 60 frames
+/// and due at its end.
+fn key_cycle(i: usize) -> Option<model::source::KeyPoseTarget> {
+    (i % 60 > 30).then_some(model::source::KeyPoseTarget {
+        rotations: Pose::rest().local_rotations,
+        frames_to_go: (60 - i % 60) as u32,
+    })
+}
+
+#[test]
+fn stepping_the_dancer_does_not_allocate() {
+    let model = daemon::dancer::load_model(None).unwrap();
+    let mut dancer = daemon::dancer::neural_dancer(&model, 5).unwrap();
+    let (allocations, pose) = allocations_stepping(&mut dancer, 12.0, |i| {
+        Controls {
+            temperature: if i % 100 < 50 { 1.0 } else { 0.3 },
+            key_pose: key_cycle(i),
+            // The accent knob turned live, as a performer would.
+            beat_accent: Some((i % 90) as f32 / 100.0),
+            // And the style switched live, through every style and auto.
+            style: match i % 250 / 50 {
+                4 => model::style::StyleRequest::Auto,
+                k => model::style::StyleRequest::Style(model::style::DanceStyle::ALL[k]),
+            },
+            // And the key route switched live.
+            key_route: Some(if i % 400 < 200 {
+                model::source::KeyPoseRoute::Overlay
+            } else {
+                model::source::KeyPoseRoute::Network
+            }),
+        }
+    });
+    assert_eq!(allocations, 0);
     assert!(pose.is_finite());
 }
 
@@ -277,7 +295,7 @@ fn switching_styles_with_their_own_seed_clips_does_not_allocate() {
 fn steering_by_style_and_key_does_not_allocate() {
     use model::neural::config::NetConfig;
     use model::neural::file::{NeuralModel, TrainingSummary};
-    use model::source::{KeyPoseRoute, KeyPoseTarget};
+    use model::source::KeyPoseRoute;
     use model::style::{DanceStyle, StyleRequest};
     // A network with a style input, steered by its style and by a key handed to it: each
     // frame runs the network twice and moves the context between the two passes.
@@ -291,26 +309,12 @@ fn steering_by_style_and_key_does_not_allocate() {
     dancer.set_style_strength(2.0);
     dancer.set_key_strength(2.5);
     dancer.set_key_pose_route(KeyPoseRoute::Network);
-    let (music, _) = common::demo_music(8.0, 25.0);
-    let look = dancer.lookahead_frames();
-    let rotations = Pose::rest().local_rotations;
-    let mut pose = Pose::rest();
-    let _alone = ALLOCATION_PROOF.lock().unwrap_or_else(|e| e.into_inner());
-    let before = daemon::alloc_counter::callback_allocations();
-    daemon::alloc_counter::in_callback(|| {
-        for i in 0..music.len() - look {
-            let controls = Controls {
-                temperature: 0.5,
-                key_pose: (i % 60 > 30).then_some(KeyPoseTarget {
-                    rotations,
-                    frames_to_go: (60 - i % 60) as u32,
-                }),
-                style: StyleRequest::Style(DanceStyle::ALL[i % 200 / 50]),
-                ..Controls::default()
-            };
-            dancer.step(&music[i..=i + look], &controls, &mut pose);
-        }
+    let (allocations, pose) = allocations_stepping(&mut dancer, 8.0, |i| Controls {
+        temperature: 0.5,
+        key_pose: key_cycle(i),
+        style: StyleRequest::Style(DanceStyle::ALL[i % 200 / 50]),
+        ..Controls::default()
     });
-    assert_eq!(daemon::alloc_counter::callback_allocations() - before, 0);
+    assert_eq!(allocations, 0);
     assert!(pose.is_finite());
 }
