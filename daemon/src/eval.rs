@@ -481,6 +481,20 @@ impl EvalSet {
         Some(confusion)
     }
 
+    /// What the style judge reads, by the song's style: over every [`STYLE_WINDOW_S`] window
+    /// of `motions` (one per validation dance), the kinetic features averaged over the joints.
+    pub fn style_kinetics(&self, motions: &[Vec<Pose>]) -> [Option<KineticProfile>; 4] {
+        let skeleton = Skeleton::default_adult();
+        let mut windows: [Vec<Vec<f64>>; 4] = Default::default();
+        for (m, d) in motions.iter().zip(&self.validation) {
+            if let Some(style) = style_of(&d.name) {
+                let p = skeleton.trajectory(m);
+                windows[style].extend(windows_of(&p, (STYLE_WINDOW_S * TANG_FPS) as usize));
+            }
+        }
+        windows.map(|w| KineticProfile::of(&w))
+    }
+
     /// The style classifier's names for every [`STYLE_WINDOW_S`] window of `source` dancing
     /// every validation song with each style requested in turn: `confusion[requested][named]`.
     pub fn requested_style_confusion(
@@ -890,6 +904,60 @@ pub fn retrieval(library: ClipLibrary) -> Result<RetrievalDancer> {
     RetrievalDancer::new(library, 1).context("starting the retrieval dancer")
 }
 
+/// The kinetic features the style judge reads, averaged over the joints and a style's windows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KineticProfile {
+    /// Mean squared horizontal speed, m²/s².
+    pub horizontal: f64,
+    /// Mean squared vertical speed, m²/s².
+    pub vertical: f64,
+    /// Mean acceleration, m/s².
+    pub acceleration: f64,
+    /// Windows averaged.
+    pub windows: usize,
+}
+
+impl KineticProfile {
+    /// The mean over `windows` (kinetic feature vectors, three per joint) and their joints;
+    /// `None` without a window.
+    pub fn of(windows: &[Vec<f64>]) -> Option<Self> {
+        let mean = |k: usize| {
+            windows
+                .iter()
+                .map(|w| {
+                    let joints = (w.len() / 3).max(1) as f64;
+                    w.iter().skip(k).step_by(3).sum::<f64>() / joints
+                })
+                .sum::<f64>()
+                / windows.len() as f64
+        };
+        (!windows.is_empty()).then(|| KineticProfile {
+            horizontal: mean(0),
+            vertical: mean(1),
+            acceleration: mean(2),
+            windows: windows.len(),
+        })
+    }
+}
+
+/// Kinetic profiles by the song's style, one row per system and style, as a table.
+pub fn kinetics_table(rows: &[(String, [Option<KineticProfile>; 4])]) -> String {
+    let mut s = String::from(
+        "| system | song's style | horizontal speed² m²/s² | vertical speed² m²/s² | acceleration m/s² | windows |\n| --- | --- | --- | --- | --- | --- |\n",
+    );
+    for (system, profiles) in rows {
+        for (style, p) in profiles.iter().enumerate() {
+            if let Some(p) = p {
+                s += &format!(
+                    "| {system} | {} | {:.3} | {:.3} | {:.2} | {} |\n",
+                    STYLES[style], p.horizontal, p.vertical, p.acceleration, p.windows
+                );
+            }
+        }
+    }
+    s
+}
+
 /// A style confusion matrix as a table, with the share named right.
 pub fn style_table(system: &str, confusion: &[[usize; 4]; 4]) -> String {
     style_table_of(system, "song's style", confusion)
@@ -1055,6 +1123,44 @@ mod tests {
         assert_eq!(style_of("DANCE_T_5").map(|s| STYLES[s]), Some("tango"));
         assert_eq!(style_of("DANCE_X_1"), None);
         assert_eq!(style_of("song"), None);
+    }
+
+    #[test]
+    fn a_kinetic_profile_averages_the_joints_and_the_windows() {
+        // Two joints over 10 s: one walks along x at 1 m/s, one bobs up and down; a second
+        // window has both still.
+        let frames = (STYLE_WINDOW_S * TANG_FPS) as usize;
+        let walk_and_bob: Vec<glam::Vec3> = (0..frames)
+            .flat_map(|f| {
+                let t = f as f32 / TANG_FPS as f32;
+                [
+                    glam::Vec3::new(t, 0.0, 0.0),
+                    glam::Vec3::new(0.0, 0.1 * (std::f32::consts::TAU * t).sin(), 0.0),
+                ]
+            })
+            .collect();
+        let features =
+            |p: &[glam::Vec3]| kinetic_features(&JointTrack::new(p, 2, TANG_FPS).unwrap()).unwrap();
+        let moving = features(&walk_and_bob);
+        let still = features(&vec![glam::Vec3::ZERO; 2 * frames]);
+        let p = KineticProfile::of(&[moving.clone(), still]).unwrap();
+        assert_eq!(p.windows, 2);
+        // Horizontal: the walker's 1 m²/s², halved over two joints and again over two windows.
+        assert!((p.horizontal - 0.25).abs() < 1e-3, "{p:?}");
+        // Vertical: the bobbing joint's mean squared speed, (0.1·2π)²/2 ≈ 0.197 (smoothed a
+        // little by the kinetic window), over two joints and two windows.
+        assert!(
+            (p.vertical - (moving[1] + moving[4]) / 4.0).abs() < 1e-9,
+            "{p:?}"
+        );
+        assert!((0.045..0.05).contains(&p.vertical), "{p:?}");
+        // Acceleration: the bob's mean |a|, 0.1·(2π)²·2/π ≈ 2.51 m/s², over four.
+        assert!(
+            (p.acceleration - (moving[2] + moving[5]) / 4.0).abs() < 1e-9,
+            "{p:?}"
+        );
+        assert!((0.58..0.64).contains(&p.acceleration), "{p:?}");
+        assert!(KineticProfile::of(&[]).is_none());
     }
 
     #[test]

@@ -2,6 +2,8 @@
 //!
 //! This crate wires the `dsp` analysis to files, commands and the live pipeline.
 
+#![warn(missing_docs)]
+
 pub mod alloc_counter;
 pub mod bar_cue;
 pub mod beat_recovery;

@@ -9,6 +9,8 @@
 //! [`BeatTracker`] → [`MeterTracker`] (beat-synchronous features, the downbeat network, the bar
 //! pointer) → [`FeatureFramer`] at the model's frame rate.
 
+#![warn(missing_docs)]
+
 pub mod analyzer;
 #[cfg(feature = "aubio")]
 pub mod aubio_tracker;

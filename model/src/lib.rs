@@ -3,6 +3,8 @@
 //!
 //! Like `dsp`, this crate knows nothing of threads, sockets or audio devices.
 
+#![warn(missing_docs)]
+
 pub mod alignment;
 pub mod bvh;
 pub mod clip_file;

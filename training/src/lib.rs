@@ -4,6 +4,8 @@
 //! Everything here writes files the live binary reads (`.dnn` models, `.dnba` beat networks);
 //! nothing here is linked into `danced`, so the live binary carries no ML framework.
 
+#![warn(missing_docs)]
+
 pub mod beat_training;
 pub mod body_shape;
 pub mod command;

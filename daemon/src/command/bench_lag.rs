@@ -46,6 +46,7 @@ pub struct BenchLagArgs {
     /// Tempo jumps measured: pairs of the data set's songs joined on a beat.
     #[arg(long, default_value_t = 4)]
     pub jumps: usize,
+    /// The dancer measured.
     #[command(flatten)]
     pub dancer: SourceArgs,
 }

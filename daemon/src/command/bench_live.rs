@@ -24,6 +24,7 @@ pub struct BenchLiveArgs {
     /// Write the stats as JSON here.
     #[arg(long)]
     pub stats_json: Option<PathBuf>,
+    /// The dancer measured.
     #[command(flatten)]
     pub dancer: SourceArgs,
 }

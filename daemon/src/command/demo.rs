@@ -21,8 +21,10 @@ pub struct DemoArgs {
     /// Write the run's stats as JSON here.
     #[arg(long)]
     pub stats_json: Option<PathBuf>,
+    /// The dancer.
     #[command(flatten)]
     pub dancer: SourceArgs,
+    /// Where the browser view is served, if anywhere.
     #[command(flatten)]
     pub view: ViewFlag,
 }

@@ -185,15 +185,17 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     let mut rows = vec![set.score("ground truth", &gt)?];
     // What `danced-train dancer --beat-retime` makes of the data: the cost of the retime in
     // FID_k, and the beat it puts in.
+    let mut styled = vec![("ground truth".to_string(), gt.clone())];
     for depth in [0.2, 0.3] {
         let retimed = set.ground_truth_beat_retimed(depth);
-        rows.push(set.score(&format!("ground truth, beat-retimed {depth}"), &retimed)?);
+        let label = format!("ground truth, beat-retimed {depth}");
+        rows.push(set.score(&label, &retimed)?);
+        styled.push((label, retimed));
     }
     if o.ground_truth {
         print!("{}", crate::eval::table(&rows));
         return Ok(());
     }
-    let mut styled = vec![("ground truth".to_string(), gt.clone())];
     let model = crate::dancer::load_model(o.model.as_deref())?;
     let mut sources = sources(o, &model)?;
     for (name, dancer) in sources.iter_mut() {
@@ -206,7 +208,7 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
                 eprintln!("  {label}, last song: {}", c.summary());
             }
             rows.push(set.score(&label, &motions)?);
-            if t == 0.5 && (name == "neural" || name == "retrieval" || name == NETWORK_ONLY) {
+            if name == "neural" || name == "retrieval" || name == NETWORK_ONLY {
                 styled.push((label.clone(), motions.clone()));
             }
         }
@@ -219,6 +221,14 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
             print!("\n{}", crate::eval::style_table(label, &c));
         }
     }
+    // What the judge reads: a dancer whose kinetics stay those of one style is named that
+    // style whatever the song.
+    let kinetics: Vec<_> = styled
+        .iter()
+        .filter(|(label, _)| label == "ground truth" || label.ends_with("T=0.5"))
+        .map(|(label, motions)| (label.clone(), set.style_kinetics(motions)))
+        .collect();
+    print!("\n{}", crate::eval::kinetics_table(&kinetics));
     // With each style requested in turn on every song (models with a style input).
     let probe = eval_dancer(o, &model)?;
     if probe.has_style_input() {

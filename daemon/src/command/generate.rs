@@ -19,6 +19,7 @@ pub struct GenerateArgs {
     /// Output BVH file.
     #[arg(long)]
     pub out: PathBuf,
+    /// The dancer.
     #[command(flatten)]
     pub dancer: SourceArgs,
     /// Start dancing this many seconds into the song (the analysis starts there too, as it

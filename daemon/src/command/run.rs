@@ -68,8 +68,10 @@ pub struct RunArgs {
     /// Key-pose bank (TOML; default: the built-in configs/poses/bank.toml).
     #[arg(long)]
     pub poses: Option<PathBuf>,
+    /// The dancer.
     #[command(flatten)]
     pub dancer: SourceArgs,
+    /// Where the browser view is served, if anywhere.
     #[command(flatten)]
     pub view: ViewFlag,
     /// MIDI map (TOML; default: the built-in configs/midi/generic.toml).

@@ -45,6 +45,7 @@ pub struct TrainBeatsArgs {
     /// Augmentation: standard deviation of a random log gain per sequence and band group.
     #[arg(long, default_value_t = BeatTrainConfig::default().gain_jitter)]
     pub gain_jitter: f32,
+    /// How many networks are trained, and how.
     #[command(flatten)]
     pub ensemble: EnsembleArgs,
 }

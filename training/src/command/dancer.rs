@@ -211,6 +211,10 @@ pub struct TrainArgs {
     /// e.g. `0.8,1.25,1.5`: a dance of 87 BPM at 70, 109 and 130 BPM), comma-separated.
     #[arg(long, value_delimiter = ',', value_parser = parse_speed)]
     pub speeds: Vec<f64>,
+    /// Train and validate on the dances of these styles only (e.g. `chacha`; comma-separated);
+    /// default: every style.
+    #[arg(long, value_delimiter = ',', value_parser = parse_style)]
+    pub styles: Vec<model::style::DanceStyle>,
     /// Threads building the dances.
     #[arg(long, default_value_t = 1)]
     pub jobs: usize,
@@ -235,6 +239,11 @@ fn parse_speed(s: &str) -> Result<f64, String> {
         Ok(v) if (0.25..=4.0).contains(&v) => Ok(v),
         _ => Err(format!("{s:?}: a speed is a number in 0.25..=4")),
     }
+}
+
+fn parse_style(s: &str) -> Result<model::style::DanceStyle, String> {
+    model::style::DanceStyle::from_name(s)
+        .ok_or_else(|| format!("{s:?}: a style is chacha, rumba, tango or waltz"))
 }
 
 fn parse_quiet(s: &str) -> Result<f64, String> {
@@ -445,6 +454,12 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         &args.speeds,
         args.quiet_passages,
     )?);
+    if !args.styles.is_empty() {
+        dances.retain(|d| {
+            model::style::DanceStyle::of_tang_dance(&d.name)
+                .is_some_and(|s| args.styles.contains(&s))
+        });
+    }
     if args.beat_retime > 0.0 {
         for d in dances.iter_mut().filter(|d| !d.validation) {
             *d = d.beat_retimed(args.beat_retime);
@@ -740,6 +755,12 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         } else {
             let list: Vec<String> = args.speeds.iter().map(f64::to_string).collect();
             format!(" --speeds {}", list.join(","))
+        }
+        + &if args.styles.is_empty() {
+            String::new()
+        } else {
+            let list: Vec<&str> = args.styles.iter().map(|s| s.name()).collect();
+            format!(" --styles {}", list.join(","))
         };
     model.training.recipe = if previous.recipe.is_empty() {
         recipe

@@ -47,6 +47,7 @@ pub struct TrainDownbeatsArgs {
     /// Standard deviation of the noise added to the inputs.
     #[arg(long, default_value_t = DownbeatTrainConfig::default().input_noise)]
     pub input_noise: f32,
+    /// How many networks are trained, and how.
     #[command(flatten)]
     pub ensemble: EnsembleArgs,
 }
