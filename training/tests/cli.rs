@@ -150,3 +150,17 @@ fn train_writes_a_model_that_generate_and_bench_use() {
     assert!(String::from_utf8_lossy(&run.stderr).contains("neural source"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn an_unknown_style_to_train_on_is_refused_by_name() {
+    let out = danced_train()
+        .args(["dancer", "--styles", "chacha,salsa", "--max-steps", "1"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("\"salsa\": a style is chacha, rumba, tango or waltz"),
+        "{stderr}"
+    );
+}

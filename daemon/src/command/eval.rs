@@ -183,9 +183,9 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
     }
     let gt = set.ground_truth();
     let mut rows = vec![set.score("ground truth", &gt)?];
-    // What `danced-train dancer --beat-retime` makes of the data: the cost of the retime in
-    // FID_k, and the beat it puts in.
     let mut styled = vec![("ground truth".to_string(), gt.clone())];
+    // What `danced-train dancer --beat-retime` makes of the data: the cost of the retime in
+    // FID_k, and the beat it puts in (and whether the style judge still names it).
     for depth in [0.2, 0.3] {
         let retimed = set.ground_truth_beat_retimed(depth);
         let label = format!("ground truth, beat-retimed {depth}");
