@@ -305,19 +305,25 @@ fn rollout_backprop(args: &TrainArgs) -> Option<usize> {
     }
 }
 
-/// The tang2018 dances built with their music (training and validation).
+/// The tang2018 dances of `styles` (every style if empty) built with their music (training
+/// and validation; the split is the whole data set's).
 pub(crate) fn load_dances(
     data: &Path,
     jobs: usize,
     speeds: &[f64],
     quiet_per_minute: f64,
+    styles: &[model::style::DanceStyle],
 ) -> Result<Vec<BuiltDance>> {
     let built: Vec<BuiltDance> = daemon::dataset::build_all_augmented(
         data,
         jobs,
         speeds,
         quiet_per_minute,
-        |_, _| true,
+        |d, _| {
+            styles.is_empty()
+                || model::style::DanceStyle::of_tang_dance(&d.name)
+                    .is_some_and(|s| styles.contains(&s))
+        },
         true,
     )?
     .into_iter()
@@ -453,13 +459,8 @@ pub fn train(args: &TrainArgs) -> Result<()> {
         args.jobs,
         &args.speeds,
         args.quiet_passages,
+        &args.styles,
     )?);
-    if !args.styles.is_empty() {
-        dances.retain(|d| {
-            model::style::DanceStyle::of_tang_dance(&d.name)
-                .is_some_and(|s| args.styles.contains(&s))
-        });
-    }
     if args.beat_retime > 0.0 {
         for d in dances.iter_mut().filter(|d| !d.validation) {
             *d = d.beat_retimed(args.beat_retime);

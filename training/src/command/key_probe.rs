@@ -35,7 +35,7 @@ const BINS: [(usize, usize); 5] = [(0, 0), (1, 5), (6, 12), (13, 25), (26, 63)];
 pub fn key_probe(args: &KeyProbeArgs) -> Result<()> {
     let model = NeuralModel::load(&args.model)
         .with_context(|| format!("loading {}", args.model.display()))?;
-    let dances = on_default_rig(load_dances(&args.data, args.jobs, &[], 0.0)?);
+    let dances = on_default_rig(load_dances(&args.data, args.jobs, &[], 0.0, &[])?);
     let val = pairs(&dances, true);
     if val.len() < 2 {
         bail!("the key probe needs two validation dances or more");
