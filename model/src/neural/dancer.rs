@@ -672,7 +672,6 @@ fn normalised_clip(norm: &Normalizer, motion: &[f32], music: &[f32]) -> (Vec<f32
     (m, x)
 }
 
-/// A beat accent depth in [0, 0.9] (non-finite: 0).
 /// A guidance strength as given, or 1 (as trained) where it is not finite or negative.
 fn strength_or_one(strength: f32) -> f32 {
     if strength.is_finite() && strength >= 0.0 {
@@ -682,6 +681,7 @@ fn strength_or_one(strength: f32) -> f32 {
     }
 }
 
+/// A beat accent depth in [0, 0.9] (non-finite: 0).
 fn clean_accent(depth: f32) -> f32 {
     finite_clamp(depth, 0.0, 0.9)
 }
