@@ -1,5 +1,5 @@
 //! How the dancer's beat comes back after a sudden tempo change. The dancer moves on the beat
-//! grid predicted `horizon` frames ahead (`crate::horizon`); when the music changes tempo the
+//! grid predicted `horizon` frames ahead (`model::horizon`); when the music changes tempo the
 //! prediction is wrong until the tracker hears the new tempo. For every heard beat this finds
 //! where the dancer's grid put it, and the recovery time is how long after the change every
 //! beat lands within the tolerance again.

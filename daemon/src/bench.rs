@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use dsp::BeatTrackerKind;
 use dsp::metrics::{self, BEAT_TOLERANCE_S, ONSET_TOLERANCE_S};
 
-use crate::offline::{AnalyzeOptions, FileAnalysis, analyze_file};
-use crate::output::read_times;
+use offline::analysis::{AnalyzeOptions, FileAnalysis, analyze_file};
+use offline::files::{read_beat_positions, read_times};
 
 /// A beat counts only if the tracker committed to it no later than this after it happened.
 pub const MAX_DECISION_LAG_S: f64 = 0.05;
@@ -260,25 +260,6 @@ pub fn madmom_set(data: &Path) -> BenchSet {
     }
 }
 
-/// Beats with their position in the bar (1 = downbeat) from a beat file whose second column
-/// is that position; `None` if the file has no such column.
-pub fn read_beat_positions(path: &Path) -> Option<Vec<(f64, usize)>> {
-    let text = fs::read_to_string(path).ok()?;
-    let mut out = Vec::new();
-    for line in text.lines().filter(|l| !l.trim_start().starts_with('#')) {
-        let mut cols = line.split_whitespace();
-        let (Some(t), Some(p)) = (cols.next(), cols.next()) else {
-            continue;
-        };
-        let position = p.parse::<f64>().ok()?;
-        if !(position >= 1.0 && position.fract() == 0.0) {
-            return None;
-        }
-        out.push((t.parse().ok()?, position as usize));
-    }
-    (!out.is_empty()).then_some(out)
-}
-
 /// Downbeats from a beat file whose second column is the position in the bar (1 = downbeat).
 fn read_downbeats(path: &Path) -> Option<Vec<f64>> {
     Some(
@@ -395,7 +376,7 @@ pub fn run_set(
     jobs: usize,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Vec<ItemScore> {
-    crate::pool::parallel_map(&set.items, jobs, |item| {
+    offline::pool::parallel_map(&set.items, jobs, |item| {
         let r = match analyze_file(&item.audio, options, &mut |_, _| {}) {
             Ok(a) => score(item, &a),
             Err(e) => ItemScore {

@@ -159,7 +159,7 @@ pub fn load_library(path: Option<&Path>) -> Result<(ClipLibrary, String)> {
 /// Cuts the full clip library from the training split of `data/tang2018` (fitted, aligned and
 /// featurised exactly as `danced dataset build` does); returns it with the dances used.
 pub fn training_library(data: &Path, jobs: usize) -> Result<(ClipLibrary, Vec<String>)> {
-    let built = crate::dataset::build_all(
+    let built = offline::dataset::build_all(
         data,
         jobs,
         |dance, validation| !validation && dance.audio.is_some(),
@@ -188,7 +188,7 @@ pub fn library_metadata(library: &ClipLibrary, dances: &[String], full_poses: us
         model::retrieval::RETRIEVAL_FPS,
         library.clips.len(),
         library.poses.len(),
-        crate::dataset::DATASET_VERSION,
+        offline::dataset::DATASET_VERSION,
         names.join(", ")
     )
 }

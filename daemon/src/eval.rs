@@ -21,6 +21,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use glam::Quat;
+use model::body_shape::key_pose_error_cm;
 use model::metrics::{
     ContactParams, FreezeParams, JointTrack, beat_align, beat_offset, detect_freezes, dist_k,
     fid_k, fmd, foot_skating, fpd, kinetic_features, toe_floor_y,
@@ -29,9 +30,9 @@ use model::retrieval::{ClipLibrary, RetrievalDancer};
 use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use model::source::{Controls, MotionSource};
 use model::tang2018::TANG_FPS;
+use offline::files::read_times;
 
-use crate::key_cue::{KeyCue, key_pose_error_cm, target_at};
-use crate::output::read_times;
+use crate::key_cue::{KeyCue, target_at};
 
 /// Length of the windows kinetic features are computed on, frames (5 s at 25 fps).
 const KINETIC_WINDOW_FRAMES: usize = 125;
@@ -227,7 +228,7 @@ impl EvalSet {
     /// As [`EvalSet::load`], scoring the `scored` dances (the reference is always the
     /// training dances).
     pub fn load_scoring(data: &Path, jobs: usize, scored: ScoredDances) -> Result<EvalSet> {
-        let built = crate::dataset::build_all(data, jobs, |d, _| d.audio.is_some(), false)?;
+        let built = offline::dataset::build_all(data, jobs, |d, _| d.audio.is_some(), false)?;
         let skeleton = Skeleton::default_adult();
         let mut set = EvalSet {
             validation: Vec::new(),
@@ -349,8 +350,8 @@ impl EvalSet {
         self.validation
             .iter()
             .map(|d| {
-                let times = crate::dataset::beat_retime_times(&d.music, d.poses.len(), depth);
-                crate::dataset::warp_poses(&d.poses, &times)
+                let times = offline::dataset::beat_retime_times(&d.music, d.poses.len(), depth);
+                offline::dataset::warp_poses(&d.poses, &times)
             })
             .collect()
     }
@@ -781,9 +782,9 @@ impl MusicSet {
         );
         let mut songs = Vec::new();
         for item in set.items {
-            let a = crate::offline::analyze_file(
+            let a = offline::analysis::analyze_file(
                 &item.audio,
-                crate::offline::AnalyzeOptions::native(Some(TANG_FPS)),
+                offline::analysis::AnalyzeOptions::native(Some(TANG_FPS)),
                 &mut |_, _| {},
             )
             .with_context(|| format!("analysing {}", item.audio.display()))?;
@@ -793,7 +794,7 @@ impl MusicSet {
             songs.push(MusicSong {
                 features: dsp::predicted_stream(
                     &a.features,
-                    crate::horizon::data_horizon(TANG_FPS),
+                    model::horizon::data_horizon(TANG_FPS),
                 ),
                 beats: item.beats,
                 off_beats,
@@ -1022,7 +1023,7 @@ mod tests {
             eprintln!("skipping: {} not found", data.join("tang2018").display());
             return;
         }
-        let split = crate::dataset::dances_with_split(&data).unwrap();
+        let split = offline::dataset::dances_with_split(&data).unwrap();
         let validation: Vec<&String> = split.iter().filter(|d| d.2).map(|d| &d.1).collect();
         let set = EvalSet::load_scoring(&data, 2, ScoredDances::Training).unwrap();
         let scored = set.validation_names();

@@ -9,9 +9,10 @@ use anyhow::{Context, Result, bail};
 
 use crate::live::capture::{self, CaptureSettings};
 use crate::live::config::Config;
+use crate::live::context::LiveContext;
 use crate::live::control_queue::ControlHub;
 use crate::live::io::{ControlInputs, OscSink};
-use crate::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
+use crate::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
 use crate::live::replay::{self, ReplayAudio, ReplaySettings};
 use crate::live::sink::FrameSink;
 use crate::live::stats::StatsReport;
@@ -225,7 +226,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     }
     if let Some(path) = &config.stats_json {
         let json = serde_json::to_string_pretty(&report).context("encoding the stats")?;
-        crate::output::write_atomic(path, json.as_bytes())
+        offline::files::write_atomic(path, json.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(report)

@@ -13,12 +13,13 @@ use glam::Vec3;
 use model::rig::{Joint, Pose};
 use model::source::{Controls, MotionSource};
 
+use crate::frame::FrameBuilder;
 use crate::live::config::Config;
+use crate::live::context::LiveContext;
 use crate::live::control_queue::ControlHub;
 use crate::live::io::OscSink;
-use crate::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
+use crate::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
 use crate::live::replay::{self, ReplayAudio, ReplaySettings};
-use crate::live::scheduler::FrameBuilder;
 use crate::live::sink::MemoryPoseBank;
 use crate::live::wire::ControlEvent;
 
@@ -72,7 +73,7 @@ pub fn offline_reference(
     frames: usize,
 ) -> Vec<BodyShape> {
     let horizon =
-        crate::horizon::source_horizon(&*source, lead_ms * 1e-3, crate::horizon::DEFAULT_MARGIN_S);
+        model::horizon::source_horizon(&*source, lead_ms * 1e-3, model::horizon::DEFAULT_MARGIN_S);
     let music = dsp::predicted_stream(features, horizon);
     let poses = dance_stream(source, &music, horizon, frames, |_| Controls::default());
     body_shapes(&poses)

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use crate::offline::FileAnalysis;
+use offline::analysis::FileAnalysis;
 
 /// Why a plot could not be drawn.
 #[derive(Debug, thiserror::Error)]

@@ -186,7 +186,7 @@ impl PoseBank {
 }
 
 /// Picks `count` poses from `library` as far apart as possible (farthest-point sampling on
-/// their [`body_shape`](crate::key_cue::body_shape)s), deterministic.
+/// their [`body_shape`](model::body_shape::body_shape)s), deterministic.
 pub fn pick_diverse_poses(library: &ClipLibrary, count: usize) -> Vec<Pose> {
     // Every 5th pose is plenty (clips move little in 0.2 s) and keeps this quick.
     let candidates: Vec<Pose> = library
@@ -203,7 +203,7 @@ pub fn pick_diverse_poses(library: &ClipLibrary, count: usize) -> Vec<Pose> {
         .collect();
     let shapes: Vec<[Vec3; JOINT_COUNT]> = candidates
         .iter()
-        .map(|p| crate::key_cue::body_shape(&p.local_rotations))
+        .map(|p| model::body_shape::body_shape(&p.local_rotations))
         .collect();
     let dist = |a: &[Vec3; JOINT_COUNT], b: &[Vec3; JOINT_COUNT]| {
         a.iter()

@@ -252,7 +252,7 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
     let (best, err) = frames
         .iter()
         .filter(|f| f.arrived > asked)
-        .map(|f| (f, daemon::key_cue::key_pose_error_cm(&f.pose, &target)))
+        .map(|f| (f, model::body_shape::key_pose_error_cm(&f.pose, &target)))
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap();
     let t = best.audio_time as f64;
@@ -538,11 +538,7 @@ fn beats_of_a_recorded_song_arrive_near_the_reference_beats() {
         data.join("tang2018/DANCE_C_4/audio.mp3"),
         data.join("tang2018-beats/DANCE_C_4.beats"),
     );
-    if !song.is_file() || !reference.is_file() {
-        eprintln!("skipping: {} not found", song.display());
-        return;
-    }
-    let reference = daemon::output::read_times(&reference).unwrap();
+    let reference = offline::files::read_times(&reference).unwrap();
     let native = UdpSocket::bind("127.0.0.1:0").unwrap();
     let port = native.local_addr().unwrap().port();
     let child = danced()

@@ -6,7 +6,7 @@
 use daemon::dancer::{SourceKind, SourceSettings, open_source};
 use daemon::live::replay::ReplayAudio;
 use daemon::motion_lag::{LagRun, measure_live_lag, offline_reference};
-use daemon::offline::{AnalyzeOptions, analyze_samples};
+use offline::analysis::{AnalyzeOptions, analyze_samples};
 
 /// Seconds of the demo song replayed, and left out while the tracker locks on.
 const SECONDS: f64 = 12.0;

@@ -3,7 +3,7 @@
 
 mod common;
 
-use daemon::offline::{AnalyzeOptions, analyze_file_at_speed};
+use offline::analysis::{AnalyzeOptions, analyze_file_at_speed};
 
 fn median_interval(times: &[f64]) -> f64 {
     let mut d: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();

@@ -6,9 +6,11 @@
 #![warn(missing_docs)]
 
 pub mod alignment;
+pub mod body_shape;
 pub mod bvh;
 pub mod clip_file;
 pub mod foot_lock;
+pub mod horizon;
 pub mod key_overlay;
 pub mod leg_ik;
 pub mod metrics;

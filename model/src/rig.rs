@@ -491,6 +491,14 @@ impl Pose {
     }
 }
 
+/// Blends two poses: root lerped, rotations slerped.
+pub fn blend(a: &Pose, b: &Pose, w: f32, out: &mut Pose) {
+    out.root_position = a.root_position.lerp(b.root_position, w);
+    for i in 0..JOINT_COUNT {
+        out.local_rotations[i] = a.local_rotations[i].slerp(b.local_rotations[i], w);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

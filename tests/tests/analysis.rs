@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use daemon::demo_track::{DEMO_RATE, demo_track};
-use daemon::offline::{AnalyzeOptions, analyze_file, analyze_samples};
+use offline::analysis::{AnalyzeOptions, analyze_file, analyze_samples};
 use dsp::feature::{FEATURE_DIM, FeatureLayout};
 use dsp::metrics;
 
@@ -161,7 +161,7 @@ fn hand_annotated_onsets_are_found() {
     let Some(data) = shared_data() else { return };
     let dir = data.join("madmom-tests");
     let a = analyze_file(&dir.join("sample.wav"), options(None), &mut |_, _| {}).unwrap();
-    let reference = daemon::output::read_times(&dir.join("sample.onsets")).unwrap();
+    let reference = offline::files::read_times(&dir.join("sample.onsets")).unwrap();
     let est: Vec<f64> = a.onsets.iter().map(|o| o.time_s).collect();
     let s = metrics::onset_f_measure(&reference, &est, metrics::ONSET_TOLERANCE_S);
     assert!(s.f_measure > 0.9, "onset F {}", s.f_measure);
@@ -184,7 +184,7 @@ fn synthetic_songs_with_exact_beats_are_tracked() {
     let mut total = 0.0;
     for song in songs {
         let audio = data.join("synth-beats").join(format!("{song}.flac"));
-        let reference = daemon::output::read_times(&audio.with_extension("beats")).unwrap();
+        let reference = offline::files::read_times(&audio.with_extension("beats")).unwrap();
         let a = analyze_file(&audio, options(None), &mut |_, _| {}).unwrap();
         let est: Vec<f64> = a
             .beats

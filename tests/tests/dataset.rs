@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use daemon::dataset::{build_dance, is_validation, write_dataset};
+use offline::dataset::{build_dance, is_validation, write_dataset};
 use dsp::feature::FeatureLayout;
 
 #[test]
@@ -86,7 +86,7 @@ fn quiet_passages_turn_the_song_down_and_slow_the_dance_to_half_time() {
         return;
     };
     let plain = build_dance(&dance, &data, false).unwrap();
-    let quiet = daemon::dataset::build_dance_augmented(&dance, &data, false, &[1.0], 2.0)
+    let quiet = offline::dataset::build_dance_augmented(&dance, &data, false, &[1.0], 2.0)
         .unwrap()
         .pop()
         .unwrap();
@@ -105,7 +105,7 @@ fn quiet_passages_turn_the_song_down_and_slow_the_dance_to_half_time() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
     assert!(moved < 1e-3, "moved {moved} before the first passage");
-    let energy = |d: &daemon::dataset::BuiltDance, keep: &dyn Fn(usize) -> bool| {
+    let energy = |d: &offline::dataset::BuiltDance, keep: &dyn Fn(usize) -> bool| {
         let v: Vec<f32> = (0..d.music.len())
             .filter(|&i| keep(i))
             .map(|i| d.music[i][FeatureLayout::ENERGY])

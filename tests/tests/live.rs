@@ -7,7 +7,8 @@ use std::time::Duration;
 
 use crossbeam_channel::{Receiver, unbounded};
 use daemon::live::control_queue::ControlHub;
-use daemon::live::pipeline::{LiveContext, Pipeline, PipelineParts, PipelineSettings};
+use daemon::live::context::LiveContext;
+use daemon::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
 use daemon::live::replay::{self, ReplayAudio, ReplaySettings};
 use daemon::live::sink::{ChannelSink, FrameSink, MemoryPoseBank, SinkItem};
 use daemon::live::stats::StatsReport;

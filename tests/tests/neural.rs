@@ -50,7 +50,7 @@ fn shipped_model_says_what_it_was_trained_on() {
     // Trained on the music as live delivers it: predicted over the data horizon, no look-ahead.
     assert_eq!(
         t.horizon_frames,
-        daemon::horizon::data_horizon(25.0),
+        model::horizon::data_horizon(25.0),
         "{t:?}"
     );
     assert_eq!(model.config.lookahead, 0);

@@ -1,6 +1,6 @@
 //! The body shape of poses given as the network's normalised rotation features, with its
 //! gradient: joint positions relative to the hips, heading removed, on the default rig — what
-//! `danced eval` scores a key pose by (`daemon::key_cue::key_pose_error_cm`). A distance in
+//! `danced eval` scores a key pose by (`model::body_shape::key_pose_error_cm`). A distance in
 //! normalised rotations weighs every feature alike, so the wrists', the head's and the toes'
 //! own rotations (which move no joint) count as much as the hips' (which move all of them).
 
@@ -159,7 +159,7 @@ mod tests {
     use super::*;
     use crate::device::cpu_device;
     use crate::layers::values;
-    use daemon::key_cue::body_shape;
+    use model::body_shape::body_shape;
     use glam::Quat;
     use model::motion::MOTION_FEATURE_DIM;
     use model::neural::rng::Rng;

@@ -6,12 +6,12 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::ValueEnum;
+use offline::analysis::{AnalyzeOptions, analyze_file, analyze_samples};
+use offline::files::{beats_text, features_npy, features_sidecar, onsets_text, write_atomic};
+use offline::progress::audio_bar;
 
 use crate::bench;
 use crate::command::tracker::TrackerArg;
-use crate::offline::{AnalyzeOptions, analyze_file, analyze_samples};
-use crate::output::{beats_text, features_npy, features_sidecar, onsets_text, write_atomic};
-use crate::progress::audio_bar;
 
 #[derive(clap::Args, Debug)]
 /// Options of `danced analyze`.

@@ -4,10 +4,10 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use dsp::BeatTrackerKind;
+use offline::progress::count_bar;
 
 use crate::bench;
 use crate::command::tracker::TrackerArg;
-use crate::progress::count_bar;
 
 #[derive(clap::Args, Debug)]
 /// Options of `danced bench beats`.
@@ -94,7 +94,7 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
         let mut row = vec![tracker.name().to_string()];
         let mut all = Vec::new();
         for set in &sets {
-            let options = crate::offline::AnalyzeOptions {
+            let options = offline::analysis::AnalyzeOptions {
                 tracker,
                 beat_params,
                 bar_params,

@@ -5,13 +5,13 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use offline::analysis::{AnalyzeOptions, analyze_samples};
 
 use crate::command::source::SourceArgs;
 use crate::dancer::{SourceKind, SourceSettings, open_source};
 use crate::live::config::Config;
 use crate::live::replay::ReplayAudio;
 use crate::motion_lag::{LagRun, dance_stream, measure_live_lag, offline_reference};
-use crate::offline::{AnalyzeOptions, analyze_samples};
 
 /// Options of `danced bench lag`.
 #[derive(clap::Args, Debug)]
@@ -215,7 +215,7 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
             let kind = SourceKind::parse(name).with_context(|| format!("unknown dancer {name}"))?;
             let mut source = open_source(kind, &source_settings(kind, config), config.dancer.seed)?;
             let fps = source.frame_rate();
-            let horizon = crate::horizon::offline_horizon(&*source);
+            let horizon = model::horizon::offline_horizon(&*source);
             let errors = dancer_beat_errors(&fa.features, horizon, fps, &s.beats);
             let back = recovery_s(&errors, s.cut_s, ON_BEAT_S);
             // How the rest of the song goes: beats on time from 8 s after the jump.

@@ -32,12 +32,12 @@ pub struct BenchModelArgs {
 fn demo_music(rate: f64) -> Result<Vec<[f32; FEATURE_DIM]>> {
     use crate::demo_track::{DEMO_RATE, demo_track};
     let song = demo_track(30.0);
-    let a = crate::offline::analyze_samples(
+    let a = offline::analysis::analyze_samples(
         "demo",
         &song.samples,
         DEMO_RATE,
         2,
-        crate::offline::AnalyzeOptions::native(Some(rate)),
+        offline::analysis::AnalyzeOptions::native(Some(rate)),
     )?;
     Ok(a.features.iter().map(|f| f.values).collect())
 }

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 
-use crate::progress::count_bar;
+use offline::progress::count_bar;
 
 #[derive(Subcommand, Debug)]
 /// `danced dataset` subcommands.
@@ -56,13 +56,13 @@ fn audit(data: &Path, jobs: usize) -> Result<()> {
         model::tang2018::dance_dirs(&data.join("tang2018")).map_or(0, |d| d.len() as u64),
     );
     let started = Instant::now();
-    let rows = crate::dataset::audit(data, jobs, &|name| {
+    let rows = offline::dataset::audit(data, jobs, &|name| {
         pb.set_message(name.to_string());
         pb.inc(1);
     })
     .with_context(|| format!("reading {}", data.display()))?;
     pb.finish_and_clear();
-    print!("{}", crate::dataset::audit_table(&rows));
+    print!("{}", offline::dataset::audit_table(&rows));
     for r in rows.iter().filter(|r| r.problem.is_some() && r.frames > 0) {
         eprintln!("{}: {}", r.name, r.problem.as_deref().unwrap_or(""));
     }
@@ -76,7 +76,7 @@ fn audit(data: &Path, jobs: usize) -> Result<()> {
 
 fn build(data: &Path, out: &Path, jobs: usize) -> Result<()> {
     let started = Instant::now();
-    let results = crate::dataset::build_all(data, jobs, |_, _| true, true)?;
+    let results = offline::dataset::build_all(data, jobs, |_, _| true, true)?;
     let mut built = Vec::new();
     let mut skipped = Vec::new();
     for (name, r) in results {
@@ -91,7 +91,7 @@ fn build(data: &Path, out: &Path, jobs: usize) -> Result<()> {
             data.join("tang2018").display()
         );
     }
-    crate::dataset::write_dataset(out, &built).map_err(anyhow::Error::msg)?;
+    offline::dataset::write_dataset(out, &built)?;
     let frames = |v: bool| {
         built
             .iter()

@@ -4,11 +4,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use offline::analysis::{AnalyzeOptions, analyze_file};
 
 use crate::command::source::SourceArgs;
 use crate::dancer::{SourceKind, SourceSettings};
 use crate::live::config::Config;
-use crate::offline::{AnalyzeOptions, analyze_file};
 
 #[derive(clap::Args, Debug)]
 /// Options of `danced generate`.
@@ -168,7 +168,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     let limit = seconds.map_or(usize::MAX, |s| (s * dancer.frame_rate()) as usize);
     // What the live pipeline hands the dancer at lead 0: each frame predicted from the analysis
     // `horizon` frames earlier.
-    let horizon = crate::horizon::offline_horizon(&*dancer);
+    let horizon = model::horizon::offline_horizon(&*dancer);
     let music = dsp::predicted_stream(&a.features, horizon);
     let step_start = Instant::now();
     let poses = crate::motion_lag::dance_stream(
@@ -191,7 +191,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
                 "key pose {} at {:.2} s: mean joint error {:.2} cm",
                 c.name,
                 start + c.frame as f64 / fps,
-                crate::key_cue::key_pose_error_cm(p, &c.rotations)
+                model::body_shape::key_pose_error_cm(p, &c.rotations)
             ),
             None => println!("key pose {} lies after the end of the motion", c.name),
         }

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Subcommand;
 
-use crate::output::write_atomic;
+use offline::files::write_atomic;
 
 #[derive(Subcommand, Debug)]
 /// `danced library` subcommands.

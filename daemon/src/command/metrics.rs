@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use model::metrics::{ContactParams, FreezeParams, JointTrack};
 use model::rig::{JOINT_COUNT, Joint, Skeleton};
 
-use crate::offline::{AnalyzeOptions, analyze_file};
+use offline::analysis::{AnalyzeOptions, analyze_file};
 
 /// Options of `danced metrics`.
 #[derive(clap::Args, Debug)]

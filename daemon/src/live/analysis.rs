@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use dsp::{AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, FeatureFrame, HopFrame, OnsetEvent};
 
-use super::pipeline::LiveContext;
+use super::context::LiveContext;
 use super::ring::{BlockMarker, RingReader};
 use super::stats::Stats;
 use super::timeline::Anchor;

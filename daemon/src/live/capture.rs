@@ -14,8 +14,8 @@ use cpal::{
 };
 use thiserror::Error;
 
+use super::context::LiveContext;
 use super::input_mix::{InputMix, MAX_INPUT_CHANNELS};
-use super::pipeline::LiveContext;
 use super::ring::RingWriter;
 use crate::alloc_counter::in_callback;
 

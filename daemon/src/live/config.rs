@@ -122,7 +122,7 @@ impl Default for OutputConfig {
     fn default() -> Self {
         Self {
             rate_hz: 60.0,
-            margin_ms: crate::horizon::DEFAULT_MARGIN_S * 1e3,
+            margin_ms: model::horizon::DEFAULT_MARGIN_S * 1e3,
             lead_ms: 0.0,
             realtime: true,
             osc: vec!["127.0.0.1:10000".into()],

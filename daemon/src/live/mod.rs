@@ -5,6 +5,7 @@ pub mod analysis;
 pub mod beat_clock;
 pub mod capture;
 pub mod config;
+pub mod context;
 pub mod control_queue;
 pub mod devices;
 pub mod input_mix;

@@ -13,8 +13,8 @@ use model::rig::{JOINT_COUNT, Pose};
 use model::source::{Controls, KeyPoseTarget, MotionSource};
 
 use super::analysis::FeatureMsg;
+use super::context::LiveContext;
 use super::control_queue::{ControlReceiver, MotionCommand};
-use super::pipeline::LiveContext;
 use super::stats::{KEY_POSE_NONE, KEY_POSE_PENDING, KEY_POSE_REACHED};
 use super::timeline::TimedPose;
 use super::wire::Quantize;
@@ -72,7 +72,7 @@ pub struct MotionSettings {
     /// Initial dance style.
     pub style: model::style::StyleRequest,
     /// Model frames past the newest analysed frame each pose is made for (at least the
-    /// source's look-ahead; see `crate::horizon`).
+    /// source's look-ahead; see `model::horizon`).
     pub horizon_frames: usize,
 }
 

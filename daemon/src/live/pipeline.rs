@@ -1,8 +1,7 @@
 //! The live pipeline: analysis, motion and sender threads around the audio ring, started
 //! together and stopped together (one stop flag for Ctrl-C, `--duration` and tests).
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::thread::JoinHandle;
 use std::time::Instant;
 
@@ -10,17 +9,14 @@ use anyhow::{Context, Result, anyhow};
 use model::source::MotionSource;
 
 use super::analysis::{self, AnalysisQueues, AnalysisSettings};
+use super::context::LiveContext;
 use super::control_queue::ControlHub;
 use super::motion::{self, MotionQueues, MotionSettings};
-use super::ring::{RingReader, RingWriter, audio_ring};
+use super::ring::RingReader;
 use super::scheduler::{self, SchedulerSettings, SenderQueues};
 use super::sink::FrameSink;
 use super::stats::{Stats, StatsReport, process_cpu_s};
 
-/// Interleaved samples the audio ring holds (≈ 2.7 s of 48 kHz stereo).
-pub const RING_SAMPLES: usize = 1 << 18;
-/// Blocks (markers) the audio ring holds.
-pub const RING_BLOCKS: usize = 4096;
 /// Feature frames the analysis → motion queue holds (40 s at 25 fps).
 pub const FEATURE_QUEUE: usize = 1024;
 /// Analysis events the analysis → sender queue holds.
@@ -64,7 +60,7 @@ impl Default for PipelineSettings {
         Self {
             rate_hz: 60.0,
             speed: 1.0,
-            margin_ms: crate::horizon::DEFAULT_MARGIN_S * 1e3,
+            margin_ms: model::horizon::DEFAULT_MARGIN_S * 1e3,
             lead_ms: 0.0,
             temperature: 0.5,
             transition_beats: 1.0,
@@ -73,44 +69,6 @@ impl Default for PipelineSettings {
             silence_after_s: 0.25,
             realtime: true,
         }
-    }
-}
-
-/// What every part of a run shares: the clock epoch, the counters and the stop flag.
-#[derive(Clone)]
-pub struct LiveContext {
-    /// Zero of every wall time in the run (ns offsets from it are stored in atomics).
-    pub epoch: Instant,
-    /// The run's counters.
-    pub stats: Arc<Stats>,
-    /// Set to stop every thread.
-    pub stop: Arc<AtomicBool>,
-}
-
-impl Default for LiveContext {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl LiveContext {
-    /// A fresh context starting now.
-    pub fn new() -> Self {
-        Self {
-            epoch: Instant::now(),
-            stats: Arc::new(Stats::new()),
-            stop: Arc::new(AtomicBool::new(false)),
-        }
-    }
-
-    /// A new audio ring for this run.
-    pub fn ring(&self) -> (RingWriter, RingReader) {
-        audio_ring(RING_SAMPLES, RING_BLOCKS, self.epoch, self.stats.clone())
-    }
-
-    /// Whether the run was asked to stop.
-    pub fn stopped(&self) -> bool {
-        self.stop.load(Ordering::Relaxed)
     }
 }
 
@@ -161,7 +119,7 @@ impl Pipeline {
         }
         let model_rate = parts.source.frame_rate();
         // Audio seconds: the lead and the margin are wall times.
-        let horizon = crate::horizon::source_horizon(
+        let horizon = model::horizon::source_horizon(
             &*parts.source,
             settings.lead_ms * 1e-3 * settings.speed,
             settings.margin_ms * 1e-3 * settings.speed,
@@ -259,7 +217,7 @@ impl Pipeline {
         })
     }
 
-    /// Model frames past the newest analysed frame each pose is made for (`crate::horizon`).
+    /// Model frames past the newest analysed frame each pose is made for (`model::horizon`).
     pub fn horizon_frames(&self) -> usize {
         self.horizon_frames
     }

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 
-use super::pipeline::LiveContext;
+use super::context::LiveContext;
 use super::ring::RingWriter;
 use crate::alloc_counter::in_callback;
 
@@ -32,7 +32,7 @@ pub struct ReplayAudio {
 impl ReplayAudio {
     /// Decodes a whole file (any format `danced analyze` reads).
     pub fn from_file(path: &Path) -> Result<Self> {
-        let a = crate::decode::decode_file(path)
+        let a = offline::decode::decode_file(path)
             .with_context(|| format!("decoding {}", path.display()))?;
         if a.frames() == 0 {
             bail!("{} holds no audio", path.display());

@@ -1,21 +1,21 @@
 //! The sender thread: on a fixed grid (default 60 Hz) of a monotonic clock, it picks the audio
 //! time to show — the music heard now, plus the output lead (which cancels a renderer's display
 //! latency) — interpolates the poses around it (made ahead of time from predicted music),
-//! builds a [`BodyFrame`] in Unity coordinates stamped with when it should be shown, and hands
+//! builds a [`BodyFrame`](super::wire::BodyFrame) in Unity coordinates stamped with when it should be shown, and hands
 //! it to the sink with the beats it crossed ([`BeatClock`]) and any pending analysis events.
 
 use std::sync::atomic::Ordering;
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
-use glam::{Quat, Vec3};
-use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton, to_unity_position, to_unity_rotation};
+use model::rig::{Pose, blend};
 
 use super::beat_clock::BeatClock;
-use super::pipeline::LiveContext;
+use super::context::LiveContext;
 use super::sink::FrameSink;
 use super::timeline::{Anchor, TimedPose, Timeline};
-use super::wire::{AnalysisEvent, BodyFrame, BoneSample};
+use super::wire::AnalysisEvent;
 use crate::alloc_counter::{CountGuard, RtThread};
+use crate::frame::FrameBuilder;
 
 /// How long before a deadline the thread stops sleeping and spins (sleep overshoot margin).
 const SPIN_BEFORE: Duration = Duration::from_micros(400);
@@ -31,83 +31,6 @@ pub struct SchedulerSettings {
     pub lead_s: f64,
     /// Audio seconds per wall second.
     pub speed: f64,
-}
-
-/// Builds [`BodyFrame`]s from poses without allocating after the first frame.
-pub struct FrameBuilder {
-    skeleton: Skeleton,
-    frame: BodyFrame,
-    positions: [Vec3; JOINT_COUNT],
-    rotations: [Quat; JOINT_COUNT],
-}
-
-impl Default for FrameBuilder {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl FrameBuilder {
-    /// A builder on the default adult rig.
-    pub fn new() -> Self {
-        Self {
-            skeleton: Skeleton::default_adult(),
-            frame: BodyFrame {
-                frame_index: 0,
-                audio_time_s: 0.0,
-                timetag: SystemTime::UNIX_EPOCH,
-                root_position: Vec3::ZERO,
-                root_rotation: Quat::IDENTITY,
-                bones: Vec::with_capacity(JOINT_COUNT),
-            },
-            positions: [Vec3::ZERO; JOINT_COUNT],
-            rotations: [Quat::IDENTITY; JOINT_COUNT],
-        }
-    }
-
-    /// The frame for `pose`, stamped with `audio_time_s` and the wall-clock time `lead_s` from
-    /// now (when it should be shown).
-    pub fn build(&mut self, index: u64, audio_time_s: f64, pose: &Pose, lead_s: f64) -> &BodyFrame {
-        self.skeleton
-            .forward_kinematics(pose, &mut self.positions, &mut self.rotations);
-        let f = &mut self.frame;
-        f.frame_index = index;
-        f.audio_time_s = audio_time_s;
-        let now = SystemTime::now();
-        let lead = Duration::from_secs_f64(lead_s.abs().min(10.0));
-        f.timetag = if lead_s >= 0.0 {
-            now + lead
-        } else {
-            now.checked_sub(lead).unwrap_or(now)
-        };
-        f.root_position = to_unity_position(pose.root_position);
-        f.root_rotation = to_unity_rotation(self.rotations[0]);
-        f.bones.clear();
-        for joint in Joint::ALL {
-            let i = joint.index();
-            let local_position = if joint.parent().is_some() {
-                self.skeleton.offsets[i]
-            } else {
-                pose.root_position
-            };
-            f.bones.push(BoneSample {
-                bone: joint.name(),
-                local_position: to_unity_position(local_position),
-                local_rotation: to_unity_rotation(pose.local_rotations[i]),
-                world_position: to_unity_position(self.positions[i]),
-                world_rotation: to_unity_rotation(self.rotations[i]),
-            });
-        }
-        &self.frame
-    }
-}
-
-/// Blends two poses: root lerped, rotations slerped.
-pub fn blend(a: &Pose, b: &Pose, w: f32, out: &mut Pose) {
-    out.root_position = a.root_position.lerp(b.root_position, w);
-    for i in 0..JOINT_COUNT {
-        out.local_rotations[i] = a.local_rotations[i].slerp(b.local_rotations[i], w);
-    }
 }
 
 /// Sleeps until `deadline`: a coarse sleep, then a short spin for precision.

@@ -4,7 +4,7 @@
 //!
 //! - **shown time** of a sent frame: the audio time heard at the send (`heard(now)`, from the
 //!   audio clock) plus the output lead. Poses are made ahead of it from predicted music
-//!   (`crate::horizon`), so nothing is waited for.
+//!   (`model::horizon`), so nothing is waited for.
 //! - **added latency** of a sent frame: `send_wall − (ingest_wall(t_shown) − lead)`, where
 //!   `t_shown` is the audio time the frame actually depicts (the shown time, or the newest
 //!   pose's time when the motion was late and the pose was held) and `ingest_wall(t)` is the

@@ -1,10 +1,10 @@
 //! A dance file for the view's playback mode (`danced view`): the poses resampled to the view's
 //! rate and encoded as the VMC bundles a live run sends, so the page applies both the same way.
 
-use model::rig::Pose;
+use model::rig::{Pose, blend};
 use protocols::{PacketPool, VmcEncoder};
 
-use crate::live::scheduler::{FrameBuilder, blend};
+use crate::frame::FrameBuilder;
 
 /// Frames per second of the playback file (a display's rate; the poses are interpolated).
 pub const PLAYBACK_RATE_HZ: f64 = 60.0;

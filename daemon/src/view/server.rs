@@ -21,8 +21,8 @@ use super::counters::{ViewCounters, ViewReport};
 use super::http::{self, RequestHead};
 use super::hud::{self, ViewHello, ViewStatus};
 use super::sink::{VIEW_EVENT_QUEUE, ViewSink};
+use crate::frame::FrameBuilder;
 use crate::live::control_queue::ControlSender;
-use crate::live::scheduler::FrameBuilder;
 use crate::live::stats::Stats;
 use crate::live::wire::{AnalysisEvent, BodyFrame};
 

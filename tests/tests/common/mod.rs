@@ -18,15 +18,15 @@ pub fn frames_differing(x: &[Pose], y: &[Pose], dot: f32) -> usize {
 #[allow(dead_code)]
 pub fn demo_music(seconds: f64, fps: f64) -> (Vec<[f32; dsp::feature::FEATURE_DIM]>, Vec<f64>) {
     let song = daemon::demo_track::demo_track(seconds);
-    let a = daemon::offline::analyze_samples(
+    let a = offline::analysis::analyze_samples(
         "demo",
         &song.samples,
         daemon::demo_track::DEMO_RATE,
         2,
-        daemon::offline::AnalyzeOptions::native(Some(fps)),
+        offline::analysis::AnalyzeOptions::native(Some(fps)),
     )
     .expect("the demo song analyses");
-    let horizon = daemon::horizon::data_horizon(fps);
+    let horizon = model::horizon::data_horizon(fps);
     (dsp::predicted_stream(&a.features, horizon), song.beats)
 }
 

@@ -9,10 +9,10 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use daemon::offline::{AnalyzeOptions, analyze_file};
-use daemon::output::{read_times, write_atomic};
 use dsp::BEAT_INPUT_DIM;
 use dsp::BeatNetEnsemble;
+use offline::analysis::{AnalyzeOptions, analyze_file};
+use offline::files::{read_times, write_atomic};
 
 use crate::beat_training::{BeatSong, BeatTrainConfig, train_beat_activation};
 use crate::song_files::{EnsembleArgs, annotated_songs};
@@ -72,7 +72,7 @@ fn load_song(audio: &Path, beats: &Path) -> Result<BeatSong> {
 pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
     let pairs = annotated_songs(&args.songs)?;
     let t = Instant::now();
-    let loaded = daemon::pool::parallel_map(&pairs, args.ensemble.jobs.max(1), |p| {
+    let loaded = offline::pool::parallel_map(&pairs, args.ensemble.jobs.max(1), |p| {
         load_song(p, &p.with_extension("beats"))
     });
     let (mut train, mut valid) = (Vec::new(), Vec::new());

@@ -7,7 +7,6 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use daemon::dataset::BuiltDance;
 use dsp::feature::FEATURE_DIM;
 use model::motion::MOTION_FEATURE_DIM;
 use model::neural::config::NetConfig;
@@ -15,6 +14,7 @@ use model::neural::file::{NeuralModel, TrainingSummary};
 use model::neural::rng::Rng;
 use model::neural::tensors::init_net;
 use model::neural::token::{MUSIC_AT, Normalizer, TOKEN_DIM};
+use offline::dataset::BuiltDance;
 
 use crate::net::{FreeRun, InputPath};
 use crate::train::{
@@ -314,7 +314,7 @@ pub(crate) fn load_dances(
     quiet_per_minute: f64,
     styles: &[model::style::DanceStyle],
 ) -> Result<Vec<BuiltDance>> {
-    let built: Vec<BuiltDance> = daemon::dataset::build_all_augmented(
+    let built: Vec<BuiltDance> = offline::dataset::build_all_augmented(
         data,
         jobs,
         speeds,
@@ -638,7 +638,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     model.training.dances = corpus.dances();
     model.training.frames = corpus.frames();
     model.training.seed = args.seed;
-    model.training.horizon_frames = daemon::horizon::data_horizon(model::tang2018::TANG_FPS);
+    model.training.horizon_frames = model::horizon::data_horizon(model::tang2018::TANG_FPS);
     let mut variants = String::new();
     if args.mirror {
         variants += ", with their mirror images";
@@ -669,7 +669,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     }
     model.training.data = format!(
         "tang2018 (Tang, Jia & Mao, Dance with Melody, ACM MM 2018; public research data), training split of danced dataset v{}, re-posed on the default rig{variants}: {}",
-        daemon::dataset::DATASET_VERSION,
+        offline::dataset::DATASET_VERSION,
         train_names.join(" ")
     );
     let recipe = format!(

@@ -11,10 +11,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use daemon::bench::read_beat_positions;
-use daemon::offline::{AnalyzeOptions, analyze_file};
-use daemon::output::write_atomic;
 use dsp::{BarFeatures, DownbeatNetEnsemble};
+use offline::analysis::{AnalyzeOptions, analyze_file};
+use offline::files::{read_beat_positions, write_atomic};
 
 use crate::downbeat_training::{
     DownbeatExamples, DownbeatTrainConfig, accuracy, train_downbeat_net,
@@ -85,7 +84,7 @@ fn load_song(audio: &Path) -> Result<LabelledSong> {
 pub fn train_downbeats(args: &TrainDownbeatsArgs) -> Result<()> {
     let songs = annotated_songs(&args.songs)?;
     let t = Instant::now();
-    let loaded = daemon::pool::parallel_map(&songs, args.ensemble.jobs.max(1), |p| load_song(p));
+    let loaded = offline::pool::parallel_map(&songs, args.ensemble.jobs.max(1), |p| load_song(p));
     let (mut train, mut valid) = (DownbeatExamples::default(), DownbeatExamples::default());
     for (i, song) in loaded.into_iter().enumerate() {
         let s = song?;

@@ -1,5 +1,6 @@
-//! Writers for analysis results. Every file is written atomically: a temporary file beside the
-//! target, then a rename, so a crash never leaves half a file behind.
+//! The text and array files of analysis results, and the beat files read back. Every file is
+//! written atomically: a temporary file beside the target, then a rename, so a crash never
+//! leaves half a file behind.
 
 use std::fs;
 use std::io::{self, Write};
@@ -100,4 +101,23 @@ pub fn read_times(path: &Path) -> io::Result<Vec<f64>> {
         out.push(t);
     }
     Ok(out)
+}
+
+/// Beats with their position in the bar (1 = downbeat) from a beat file whose second column
+/// is that position; `None` if the file has no such column.
+pub fn read_beat_positions(path: &Path) -> Option<Vec<(f64, usize)>> {
+    let text = fs::read_to_string(path).ok()?;
+    let mut out = Vec::new();
+    for line in text.lines().filter(|l| !l.trim_start().starts_with('#')) {
+        let mut cols = line.split_whitespace();
+        let (Some(t), Some(p)) = (cols.next(), cols.next()) else {
+            continue;
+        };
+        let position = p.parse::<f64>().ok()?;
+        if !(position >= 1.0 && position.fract() == 0.0) {
+            return None;
+        }
+        out.push((t.parse().ok()?, position as usize));
+    }
+    (!out.is_empty()).then_some(out)
 }

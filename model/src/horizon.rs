@@ -4,7 +4,7 @@
 //! (`dsp::FeatureFrame::predicted_at`); offline generation and the training data use the same
 //! horizon at lead 0 (`dsp::predicted_stream`), so a model learns exactly what it hears live.
 
-use model::source::MotionSource;
+use crate::source::MotionSource;
 
 /// Resampler delay allowed for (rubato's sinc filter at 44.1/48 kHz input; 0 at 22 050 Hz).
 const RESAMPLER_ALLOWANCE_S: f64 = 0.006;

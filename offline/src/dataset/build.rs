@@ -1,284 +1,25 @@
-//! `danced dataset audit`: one row per tang2018 dance — length, rig fit, measured music offset,
-//! tempo, and the ground truth's own BeatAlign and beat offset (the bar every model is held to).
+//! `danced dataset build`: every dance fitted, aligned and featurised at 25 fps, as the neural
+//! dancer learns it, with its augmentation (sped-up songs, quiet passages, beat retiming), and
+//! the `.npz` and manifest the training set is written as.
 
 use std::path::{Path, PathBuf};
 
-use model::alignment::measure_offset_within_beat;
-use model::metrics::{JointTrack, beat_align, beat_offset};
-use model::rig::{JOINT_COUNT, Joint};
+use model::metrics::JointTrack;
+use model::rig::JOINT_COUNT;
 use model::tang_fit::fit_dance;
-use model::tang2018::{TANG_FPS, TangDance, dance_dirs, load_dance};
+use model::tang2018::{TANG_FPS, TangDance, load_dance};
 
-use crate::offline::{AnalyzeOptions, analyze_file, analyze_file_at_speed};
-use crate::output::read_times;
-
-/// One dance in the audit table.
-#[derive(Clone, Debug, Default)]
-pub struct AuditRow {
-    /// Dance name.
-    pub name: String,
-    /// Motion frames.
-    pub frames: usize,
-    /// Motion seconds.
-    pub seconds: f64,
-    /// Mean per-joint position error of the rig fit, cm.
-    pub fit_error_cm: f64,
-    /// Bone-length spread of the raw points (see `model::tang_fit`).
-    pub bone_spread: f64,
-    /// Whether the song is available.
-    pub has_audio: bool,
-    /// Measured correction of the nominal start, seconds.
-    pub offset_s: Option<f64>,
-    /// Tempo heard by the native tracker over the danced span, BPM.
-    pub tempo_bpm: Option<f64>,
-    /// Ground-truth BeatAlign against the reference beats, at the measured start.
-    pub beat_align: Option<f64>,
-    /// Ground-truth beat offset (mean, sd), seconds.
-    pub beat_offset: Option<(f64, f64)>,
-    /// BeatAlign of the same motion against other songs' beats (the chance level).
-    pub mismatched_beat_align: Option<f64>,
-    /// Why the row is incomplete, if it is.
-    pub problem: Option<String>,
-}
-
-/// Where a dance sits in its song: the reference beats and the measured start.
-struct Alignment {
-    music_beats: Vec<f64>,
-    estimate: model::alignment::OffsetEstimate,
-}
-
-/// Reads the dance's reference beats and measures its start within half a beat of the nominal
-/// `start_position` (both `dataset audit` and `dataset build` use exactly this alignment).
-fn align(dance: &TangDance, track: &JointTrack<'_>, data: &Path) -> Result<Alignment, String> {
-    let reference = data
-        .join("tang2018-beats")
-        .join(format!("{}.beats", dance.name));
-    let music_beats = read_times(&reference)
-        .map_err(|e| format!("no reference beats ({}: {e})", reference.display()))?;
-    let nominal = dance.music_span.map_or(0.0, |s| s.0 / TANG_FPS);
-    let estimate = measure_offset_within_beat(track, &music_beats, nominal);
-    Ok(Alignment {
-        music_beats,
-        estimate,
-    })
-}
-
-/// Every dance folder under `data/tang2018` with its name and whether it is in the validation
-/// split, in name order.
-pub fn dances_with_split(
-    data: &Path,
-) -> Result<Vec<(PathBuf, String, bool)>, model::tang2018::TangError> {
-    let dirs = dance_dirs(&data.join("tang2018"))?;
-    let names: Vec<String> = dirs
-        .iter()
-        .map(|d| {
-            d.file_name()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned()
-        })
-        .collect();
-    Ok(dirs
-        .into_iter()
-        .zip(&names)
-        .map(|(dir, name)| (dir, name.clone(), is_validation(name, &names)))
-        .collect())
-}
-
-fn audit_dance(dance: &TangDance, data: &Path) -> AuditRow {
-    let mut row = AuditRow {
-        name: dance.name.clone(),
-        frames: dance.frames(),
-        seconds: dance.seconds(),
-        has_audio: dance.audio.is_some(),
-        ..Default::default()
-    };
-    let fit = match fit_dance(dance) {
-        Ok(f) => f,
-        Err(e) => {
-            row.problem = Some(format!("fit failed: {e}"));
-            return row;
-        }
-    };
-    row.fit_error_cm = fit.mean_error_cm;
-    row.bone_spread = fit.bone_length_spread;
-    let positions = fit.skeleton.trajectory(&fit.poses);
-    let Ok(track) = JointTrack::new(&positions, JOINT_COUNT, fit.fps) else {
-        row.problem = Some("fitted motion is not finite".into());
-        return row;
-    };
-    if dance.audio.is_none() {
-        // Motion only: the data set has no song for this dance, so no music-side numbers.
-        return row;
-    }
-    let (music, est) = match align(dance, &track, data) {
-        Ok(a) => (a.music_beats, a.estimate),
-        Err(e) => {
-            row.problem = Some(e);
-            return row;
-        }
-    };
-    row.offset_s = Some(est.offset_s);
-    // Music beats in motion time, for the metrics.
-    let local: Vec<f64> = music
-        .iter()
-        .map(|b| b - est.start_s)
-        .filter(|b| *b >= 0.0)
-        .collect();
-    row.beat_align = Some(beat_align(&track, &local));
-    row.beat_offset = beat_offset(&track, Joint::Hips.index(), &local)
-        .ok()
-        .map(|o| (o.mean_s, o.sd_s));
-    // Chance level: the same motion against three other songs' beats, each aligned by the same
-    // search as the true song (so the search itself earns neither side anything).
-    let others: Vec<f64> = other_songs(data, &dance.name, 3)
-        .iter()
-        .map(|beats| {
-            let first = beats.first().copied().unwrap_or(0.0);
-            let other = measure_offset_within_beat(&track, beats, first);
-            let shifted: Vec<f64> = beats
-                .iter()
-                .map(|b| b - other.start_s)
-                .filter(|b| *b >= 0.0)
-                .collect();
-            beat_align(&track, &shifted)
-        })
-        .collect();
-    if !others.is_empty() {
-        row.mismatched_beat_align = Some(others.iter().sum::<f64>() / others.len() as f64);
-    }
-    if let Some(audio) = &dance.audio {
-        let opts = AnalyzeOptions::native(None);
-        match analyze_file(audio, opts, &mut |_, _| {}) {
-            Ok(a) => {
-                let end = est.start_s + dance.seconds();
-                let mut t: Vec<f64> = a
-                    .beats
-                    .iter()
-                    .filter(|b| b.time_s >= est.start_s && b.time_s <= end && b.tempo_bpm > 0.0)
-                    .map(|b| b.tempo_bpm)
-                    .collect();
-                t.sort_by(f64::total_cmp);
-                row.tempo_bpm = t.get(t.len() / 2).copied();
-            }
-            Err(e) => row.problem = Some(e.to_string()),
-        }
-    }
-    row
-}
-
-/// Reference beats of up to `n` other songs, taken in name order after `name` (wrapping).
-fn other_songs(data: &Path, name: &str, n: usize) -> Vec<Vec<f64>> {
-    let dir = data.join("tang2018-beats");
-    let mut names: Vec<String> = std::fs::read_dir(&dir)
-        .map(|r| {
-            r.flatten()
-                .filter_map(|e| {
-                    e.file_name()
-                        .to_str()?
-                        .strip_suffix(".beats")
-                        .map(String::from)
-                })
-                .collect()
-        })
-        .unwrap_or_default();
-    names.sort();
-    let start = names.iter().position(|x| x.as_str() > name).unwrap_or(0);
-    names
-        .iter()
-        .cycle()
-        .skip(start)
-        .take(names.len())
-        .filter(|x| x.as_str() != name)
-        .take(n)
-        .filter_map(|x| read_times(&dir.join(format!("{x}.beats"))).ok())
-        .collect()
-}
-
-/// Audits every dance under `data/tang2018` with `jobs` threads; `progress` hears each name.
-pub fn audit(
-    data: &Path,
-    jobs: usize,
-    progress: &(dyn Fn(&str) + Sync),
-) -> Result<Vec<AuditRow>, model::tang2018::TangError> {
-    let dances = dances_with_split(data)?;
-    Ok(crate::pool::parallel_map(&dances, jobs, |(dir, _, _)| {
-        let row = match load_dance(dir) {
-            Ok(d) => audit_dance(&d, data),
-            Err(e) => AuditRow {
-                name: dir
-                    .file_name()
-                    .unwrap_or_default()
-                    .to_string_lossy()
-                    .into_owned(),
-                problem: Some(e.to_string()),
-                ..Default::default()
-            },
-        };
-        progress(&row.name);
-        row
-    }))
-}
-
-fn opt(v: Option<f64>, digits: usize) -> String {
-    v.map_or("–".to_string(), |x| format!("{x:.digits$}"))
-}
-
-/// The audit as a Markdown table with totals.
-pub fn audit_table(rows: &[AuditRow]) -> String {
-    let mut s = String::from(
-        "| dance | frames | s | fit err cm | bone spread | offset s | tempo BPM | GT BeatAlign | GT vs other songs | GT beat offset s (mean ± sd) |\n|---|---|---|---|---|---|---|---|---|---|\n",
-    );
-    for r in rows {
-        if let Some(p) = &r.problem
-            && r.frames == 0
-        {
-            s += &format!("| {} | error: {p} |\n", r.name);
-            continue;
-        }
-        s += &format!(
-            "| {} | {} | {:.1} | {:.2} | {:.3} | {} | {} | {} | {} | {} |\n",
-            r.name,
-            r.frames,
-            r.seconds,
-            r.fit_error_cm,
-            r.bone_spread,
-            opt(r.offset_s, 3),
-            opt(r.tempo_bpm, 1),
-            opt(r.beat_align, 3),
-            opt(r.mismatched_beat_align, 3),
-            r.beat_offset
-                .map_or("–".into(), |(m, sd)| format!("{m:.3} ± {sd:.3}")),
-        );
-    }
-    let ok: Vec<&AuditRow> = rows.iter().filter(|r| r.frames > 0).collect();
-    let mean = |f: &dyn Fn(&AuditRow) -> Option<f64>| {
-        let v: Vec<f64> = ok.iter().filter_map(|r| f(r)).collect();
-        if v.is_empty() {
-            None
-        } else {
-            Some(v.iter().sum::<f64>() / v.len() as f64)
-        }
-    };
-    let frames: usize = ok.iter().map(|r| r.frames).sum();
-    s += &format!(
-        "| **all {} dances** ({} with audio) | {} | {:.1} min | {} | {} | | | {} | {} | {} |\n",
-        ok.len(),
-        ok.iter().filter(|r| r.has_audio).count(),
-        frames,
-        frames as f64 / TANG_FPS / 60.0,
-        opt(mean(&|r| Some(r.fit_error_cm)), 2),
-        opt(mean(&|r| Some(r.bone_spread)), 3),
-        opt(mean(&|r| r.beat_align), 3),
-        opt(mean(&|r| r.mismatched_beat_align), 3),
-        opt(mean(&|r| r.beat_offset.map(|o| o.0)), 3),
-    );
-    s
-}
+use super::{align, dances_with_split};
+use crate::analysis::{AnalyzeOptions, analyze_file_at_speed};
+use crate::error::OfflineError;
 
 /// Version of the `dataset build` file layout; bump it when an array or its meaning changes
 /// (2: music is predicted over the data horizon, as a live dancer hears it).
 pub const DATASET_VERSION: u32 = 2;
+
+/// The dances a build took, in order: each one's name and what became of it (a dance that
+/// could not be read or built carries the reason).
+pub type BuiltDances = Vec<(String, Result<BuiltDance, OfflineError>)>;
 
 /// One dance as it enters the training set.
 #[derive(Clone, Debug)]
@@ -299,7 +40,7 @@ pub struct BuiltDance {
     pub fit_error_cm: f64,
     /// Rest height of the fitted rig's hips, metres (the dancer's size).
     pub hip_height_m: f32,
-    /// Quiet passages written into it (see [`crate::quiet_passage`]), frames `[start, end)`.
+    /// Quiet passages written into it (see [`super::quiet_passage`]), frames `[start, end)`.
     pub quiet: Vec<(usize, usize)>,
 }
 
@@ -370,30 +111,21 @@ impl BuiltDance {
     }
 }
 
-/// Deterministic split by dance, stratified by style: within each style, dances sorted by name,
-/// every fifth one from the third (indices 2, 7, 12, …) goes to validation. Styles with fewer
-/// than three dances stay in training.
-pub fn is_validation(name: &str, all_names: &[String]) -> bool {
-    let style = model::tang2018::style_letter;
-    let mut same: Vec<&String> = all_names
-        .iter()
-        .filter(|n| style(n) == style(name))
-        .collect();
-    same.sort();
-    same.iter()
-        .position(|n| n.as_str() == name)
-        .is_some_and(|i| i % 5 == 2)
-}
-
 /// Fits, aligns and featurises one dance at the motion's frame rate (25 fps): motion features
 /// from the fitted rig, music features from the *streaming* analysis of the whole song (the
 /// same code the daemon runs) as a live dancer hears them (predicted over the data horizon,
-/// `crate::horizon`), frame i of the motion paired with the music frame at song time
+/// `model::horizon`), frame i of the motion paired with the music frame at song time
 /// `start + i / 25`. Frames outside the song are dropped.
-pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<BuiltDance, String> {
+pub fn build_dance(
+    dance: &TangDance,
+    data: &Path,
+    validation: bool,
+) -> Result<BuiltDance, OfflineError> {
     build_dance_augmented(dance, data, validation, &[1.0], 0.0)?
         .pop()
-        .ok_or_else(|| format!("{}: nothing built", dance.name))
+        .ok_or_else(|| OfflineError::NothingBuilt {
+            dance: dance.name.clone(),
+        })
 }
 
 /// [`build_dance`] once per entry of `speeds`: the dance and its song played that many times
@@ -401,7 +133,7 @@ pub fn build_dance(dance: &TangDance, data: &Path, validation: bool) -> Result<B
 /// sped-up audio; the poses interpolated), so a dance of 87 BPM also teaches 70 and 130 BPM.
 /// A sped-up dance is named `NAME@SPEED` (its style letter stays). The rig is fitted once.
 /// With `quiet_per_minute` > 0, about that many quiet passages a minute are written into each
-/// built dance ([`crate::quiet_passage`]): its song turned down and darkened there before the
+/// built dance ([`super::quiet_passage`]): its song turned down and darkened there before the
 /// streaming analysis hears it, its motion slowed to half time there; each dance's passages
 /// drawn from a seed of its name (speed included).
 pub fn build_dance_augmented(
@@ -410,8 +142,8 @@ pub fn build_dance_augmented(
     validation: bool,
     speeds: &[f64],
     quiet_per_minute: f64,
-) -> Result<Vec<BuiltDance>, String> {
-    let fit = fit_dance(dance).map_err(|e| e.to_string())?;
+) -> Result<Vec<BuiltDance>, OfflineError> {
+    let fit = fit_dance(dance)?;
     let mut motion = Vec::new();
     model::motion::encode(&fit.poses, &mut motion);
     let built = BuiltDance {
@@ -429,12 +161,15 @@ pub fn build_dance_augmented(
         return Ok(vec![built]);
     };
     let positions = fit.skeleton.trajectory(&fit.poses);
-    let track = JointTrack::new(&positions, JOINT_COUNT, fit.fps).map_err(|e| e.to_string())?;
+    let track = JointTrack::new(&positions, JOINT_COUNT, fit.fps)?;
     let start_s = align(dance, &track, data)?.estimate.start_s;
     let mut out = Vec::with_capacity(speeds.len());
     for &speed in speeds {
         if !(speed.is_finite() && speed > 0.0) {
-            return Err(format!("{}: speed {speed} is not positive", dance.name));
+            return Err(OfflineError::Speed {
+                dance: dance.name.clone(),
+                speed,
+            });
         }
         let mut b = built.clone();
         if speed != 1.0 {
@@ -444,11 +179,10 @@ pub fn build_dance_augmented(
             model::motion::encode(&poses, &mut b.motion);
         }
         let opts = AnalyzeOptions::native(Some(TANG_FPS));
-        let a =
-            analyze_file_at_speed(audio, opts, speed, &mut |_, _| {}).map_err(|e| e.to_string())?;
+        let a = analyze_file_at_speed(audio, opts, speed, &mut |_, _| {})?;
         // What a live dancer hears at each frame: the analysis of a few frames earlier, its
         // beat grid extrapolated to the frame.
-        let heard = dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS));
+        let heard = dsp::predicted_stream(&a.features, model::horizon::data_horizon(TANG_FPS));
         let first = (start_s / speed * TANG_FPS).round() as i64;
         let mut keep_from = None;
         for i in 0..b.motion.len() {
@@ -488,8 +222,8 @@ fn add_quiet_passages(
     speed: f64,
     per_minute: f64,
     first: usize,
-) -> Result<(), String> {
-    use crate::quiet_passage::{QuietShaper, beat_positions, plan, warp_times};
+) -> Result<(), OfflineError> {
+    use super::quiet_passage::{QuietShaper, beat_positions, plan, warp_times};
     let seed = b.name.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, c| {
         (h ^ u64::from(c)).wrapping_mul(0x100_0000_01b3)
     });
@@ -509,7 +243,7 @@ fn add_quiet_passages(
     }
     let mut shaper = QuietShaper::new(&passages, first as f64 / TANG_FPS, TANG_FPS);
     let opts = AnalyzeOptions::native(Some(TANG_FPS));
-    let a = crate::offline::analyze_file_shaped(
+    let a = crate::analysis::analyze_file_shaped(
         audio,
         opts,
         speed,
@@ -517,9 +251,8 @@ fn add_quiet_passages(
             shaper.process(samples, first_sample, rate, channels);
         },
         &mut |_, _| {},
-    )
-    .map_err(|e| e.to_string())?;
-    let heard = dsp::predicted_stream(&a.features, crate::horizon::data_horizon(TANG_FPS));
+    )?;
+    let heard = dsp::predicted_stream(&a.features, model::horizon::data_horizon(TANG_FPS));
     let kept = heard.len().saturating_sub(first).min(b.music.len());
     b.music = heard[first.min(heard.len())..][..kept].to_vec();
     let times = warp_times(&beats[..kept], &passages);
@@ -568,7 +301,7 @@ pub fn warp_poses(poses: &[model::rig::Pose], times: &[f64]) -> Vec<model::rig::
             if w == 0.0 {
                 return poses[a];
             }
-            crate::live::scheduler::blend(&poses[a], &poses[b], w, &mut pose);
+            model::rig::blend(&poses[a], &poses[b], w, &mut pose);
             pose
         })
         .collect()
@@ -624,7 +357,7 @@ pub fn build_all(
     jobs: usize,
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     bar: bool,
-) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
+) -> Result<BuiltDances, OfflineError> {
     build_all_augmented(data, jobs, &[1.0], 0.0, wanted, bar)
 }
 
@@ -638,10 +371,14 @@ pub fn build_all_augmented(
     quiet_per_minute: f64,
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     bar: bool,
-) -> anyhow::Result<Vec<(String, Result<BuiltDance, String>)>> {
-    use anyhow::Context;
-    let dances = dances_with_split(data)
-        .with_context(|| format!("reading {}", data.join("tang2018").display()))?;
+) -> Result<BuiltDances, OfflineError> {
+    let dances = dances_with_split(data).map_err(|e| match e {
+        OfflineError::DataSet(source) => OfflineError::DataSetFolder {
+            path: data.join("tang2018"),
+            source,
+        },
+        e => e,
+    })?;
     let pb = if bar {
         crate::progress::count_bar(dances.len() as u64)
     } else {
@@ -673,7 +410,7 @@ pub fn build_dances(
     jobs: usize,
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     progress: impl Fn(&str) + Sync,
-) -> Vec<(String, Result<BuiltDance, String>)> {
+) -> BuiltDances {
     build_dances_augmented(data, dances, jobs, &[1.0], 0.0, wanted, progress)
 }
 
@@ -688,7 +425,7 @@ pub fn build_dances_augmented(
     quiet_per_minute: f64,
     wanted: impl Fn(&TangDance, bool) -> bool + Sync,
     progress: impl Fn(&str) + Sync,
-) -> Vec<(String, Result<BuiltDance, String>)> {
+) -> BuiltDances {
     let results = crate::pool::parallel_map(dances, jobs.max(1), |(dir, name, validation)| {
         let mut all = vec![1.0];
         if !*validation {
@@ -708,7 +445,7 @@ pub fn build_dances_augmented(
                     Err(e) => vec![(name.clone(), Err(e))],
                 },
             ),
-            Err(e) => Some(vec![(name.clone(), Err(e.to_string()))]),
+            Err(e) => Some(vec![(name.clone(), Err(e.into()))]),
         };
         progress(name);
         r
@@ -718,10 +455,16 @@ pub fn build_dances_augmented(
 
 /// Writes the dances as one `.npz` (arrays `<name>/motion` and, with music, `<name>/music`,
 /// float32) plus a `.json` manifest beside it, both atomically.
-pub fn write_dataset(path: &Path, dances: &[BuiltDance]) -> Result<(), String> {
+pub fn write_dataset(path: &Path, dances: &[BuiltDance]) -> Result<(), OfflineError> {
     let tmp = path.with_extension(format!("npz.tmp{}", std::process::id()));
-    let write = || -> Result<(), String> {
-        let file = std::fs::File::create(&tmp).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    let npz_error = |e: &dyn std::fmt::Display| OfflineError::Npz {
+        reason: e.to_string(),
+    };
+    let write = || -> Result<(), OfflineError> {
+        let file = std::fs::File::create(&tmp).map_err(|error| OfflineError::Write {
+            path: tmp.clone(),
+            error,
+        })?;
         let mut npz = ndarray_npy::NpzWriter::new(file);
         for d in dances {
             let m: Vec<f32> = d.motion.iter().flatten().copied().collect();
@@ -729,21 +472,24 @@ pub fn write_dataset(path: &Path, dances: &[BuiltDance]) -> Result<(), String> {
                 (d.motion.len(), model::motion::MOTION_FEATURE_DIM),
                 m,
             )
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| npz_error(&e))?;
             npz.add_array(format!("{}/motion", d.name), &m)
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| npz_error(&e))?;
             if !d.music.is_empty() {
                 let x: Vec<f32> = d.music.iter().flatten().copied().collect();
                 let x =
                     ndarray::Array2::from_shape_vec((d.music.len(), dsp::feature::FEATURE_DIM), x)
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| npz_error(&e))?;
                 npz.add_array(format!("{}/music", d.name), &x)
-                    .map_err(|e| e.to_string())?;
+                    .map_err(|e| npz_error(&e))?;
             }
         }
-        let file = npz.finish().map_err(|e| e.to_string())?;
-        file.sync_all().map_err(|e| e.to_string())?;
-        std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+        let file = npz.finish().map_err(|e| npz_error(&e))?;
+        file.sync_all().map_err(|e| npz_error(&e))?;
+        std::fs::rename(&tmp, path).map_err(|error| OfflineError::Write {
+            path: path.to_path_buf(),
+            error,
+        })
     };
     if let Err(e) = write() {
         let _ = std::fs::remove_file(&tmp);
@@ -772,15 +518,16 @@ pub fn write_dataset(path: &Path, dances: &[BuiltDance]) -> Result<(), String> {
         dsp::feature::FEATURE_DIM,
         entries.join(",\n")
     );
-    crate::output::write_atomic(&path.with_extension("json"), manifest.as_bytes())
-        .map_err(|e| format!("{}: {e}", path.with_extension("json").display()))
+    let json = path.with_extension("json");
+    crate::files::write_atomic(&json, manifest.as_bytes())
+        .map_err(|error| OfflineError::Write { path: json, error })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use glam::{Quat, Vec3};
-    use model::rig::Pose;
+    use model::rig::{Joint, Pose};
 
     fn walk(frames: usize) -> Vec<Pose> {
         (0..frames)

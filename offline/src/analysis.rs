@@ -8,7 +8,8 @@ use dsp::{
     OnsetEvent,
 };
 
-use crate::decode::{AudioFileReader, DecodeError};
+use crate::decode::AudioFileReader;
+use crate::error::OfflineError;
 
 /// Frames handed to the analyzer per call, as a sound card would (256 frames ≈ 5.8 ms at 44.1 kHz).
 pub const BLOCK_FRAMES: usize = 256;
@@ -120,22 +121,6 @@ impl AnalyzeOptions {
     }
 }
 
-/// Why a file could not be analysed.
-#[derive(Debug, thiserror::Error)]
-pub enum AnalyzeError {
-    /// The file could not be decoded.
-    #[error(transparent)]
-    Decode(#[from] DecodeError),
-    /// The analysis chain refused the file's format.
-    #[error("{path}: {source}")]
-    Dsp {
-        /// The file.
-        path: String,
-        /// What the analyzer said.
-        source: dsp::DspError,
-    },
-}
-
 struct Collector<'a> {
     result: &'a mut FileAnalysis,
     keep_hops: bool,
@@ -184,7 +169,7 @@ pub fn analyze_file(
     path: &Path,
     options: AnalyzeOptions,
     progress: &mut dyn FnMut(f64, Option<f64>),
-) -> Result<FileAnalysis, AnalyzeError> {
+) -> Result<FileAnalysis, OfflineError> {
     analyze_file_at_speed(path, options, 1.0, progress)
 }
 
@@ -196,7 +181,7 @@ pub fn analyze_file_at_speed(
     options: AnalyzeOptions,
     speed: f64,
     progress: &mut dyn FnMut(f64, Option<f64>),
-) -> Result<FileAnalysis, AnalyzeError> {
+) -> Result<FileAnalysis, OfflineError> {
     analyze_file_shaped(path, options, speed, &mut |_, _, _, _| {}, progress)
 }
 
@@ -214,7 +199,7 @@ pub fn analyze_file_shaped(
     speed: f64,
     shape: &mut SampleShaper<'_>,
     progress: &mut dyn FnMut(f64, Option<f64>),
-) -> Result<FileAnalysis, AnalyzeError> {
+) -> Result<FileAnalysis, OfflineError> {
     let decode_start = Instant::now();
     let mut reader = AudioFileReader::open(path)?;
     let open_time = decode_start.elapsed();
@@ -245,10 +230,9 @@ pub fn analyze_file_shaped(
     result.decode_time += open_time;
     result.skipped_packets = reader.skipped_packets();
     if result.duration_s == 0.0 {
-        return Err(DecodeError::Empty {
+        return Err(OfflineError::Empty {
             path: path.to_path_buf(),
-        }
-        .into());
+        });
     }
     Ok(result)
 }
@@ -261,7 +245,7 @@ pub fn analyze_samples(
     rate: u32,
     channels: u16,
     options: AnalyzeOptions,
-) -> Result<FileAnalysis, AnalyzeError> {
+) -> Result<FileAnalysis, OfflineError> {
     let mut chunks = samples.chunks(BLOCK_FRAMES * 16 * channels.max(1) as usize);
     stream(
         name.to_string(),
@@ -287,8 +271,8 @@ fn stream(
     options: AnalyzeOptions,
     total_s: Option<f64>,
     progress: &mut dyn FnMut(f64, Option<f64>),
-    next: &mut dyn FnMut(&mut Vec<f32>) -> Result<usize, AnalyzeError>,
-) -> Result<FileAnalysis, AnalyzeError> {
+    next: &mut dyn FnMut(&mut Vec<f32>) -> Result<usize, OfflineError>,
+) -> Result<FileAnalysis, OfflineError> {
     let mut analyzer = Analyzer::new(AnalyzerConfig {
         sample_rate: rate,
         channels,
@@ -297,7 +281,7 @@ fn stream(
         beat_params: options.beat_params,
         bar_params: options.bar_params,
     })
-    .map_err(|source| AnalyzeError::Dsp { path: name, source })?;
+    .map_err(|source| OfflineError::Analysis { path: name, source })?;
     let mut result = FileAnalysis {
         sample_rate: rate,
         channels,

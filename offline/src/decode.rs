@@ -17,6 +17,8 @@ use symphonia::core::formats::{FormatOptions, FormatReader, TrackType};
 use symphonia::core::io::MediaSourceStream;
 use symphonia::core::meta::MetadataOptions;
 
+use crate::error::OfflineError;
+
 /// A whole decoded audio file: interleaved `f32` samples (nominally in [-1, 1]) and their format.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DecodedAudio {
@@ -42,60 +44,6 @@ impl DecodedAudio {
     /// Number of frames (samples per channel).
     pub fn frames(&self) -> usize {
         self.samples.len() / usize::from(self.channels.max(1))
-    }
-}
-
-/// Why an audio file could not be decoded; every message names the file.
-#[derive(Debug, thiserror::Error)]
-pub enum DecodeError {
-    /// The file does not exist.
-    #[error("audio file {} not found", path.display())]
-    NotFound {
-        /// The file that was asked for.
-        path: PathBuf,
-    },
-    /// The file exists but could not be read.
-    #[error("cannot read audio file {}: {error}", path.display())]
-    Io {
-        /// The file that failed.
-        path: PathBuf,
-        /// The underlying I/O error.
-        error: io::Error,
-    },
-    /// The container or codec is not one symphonia can decode (or the file is not audio at all).
-    #[error("unsupported audio format in {}: {reason}", path.display())]
-    Unsupported {
-        /// The file that failed.
-        path: PathBuf,
-        /// What was not supported.
-        reason: String,
-    },
-    /// The file holds no audio frames (a 0-byte file, or a header declaring none).
-    #[error("audio file {} contains no audio", path.display())]
-    Empty {
-        /// The file that failed.
-        path: PathBuf,
-    },
-    /// The file looked like audio, but decoding failed before any audio came out.
-    #[error("corrupt audio file {}: {reason}", path.display())]
-    Corrupt {
-        /// The file that failed.
-        path: PathBuf,
-        /// The last decoder or demuxer complaint.
-        reason: String,
-    },
-}
-
-impl DecodeError {
-    /// The file this error is about.
-    pub fn path(&self) -> &Path {
-        match self {
-            DecodeError::NotFound { path }
-            | DecodeError::Io { path, .. }
-            | DecodeError::Unsupported { path, .. }
-            | DecodeError::Empty { path }
-            | DecodeError::Corrupt { path, .. } => path,
-        }
     }
 }
 
@@ -135,7 +83,7 @@ impl std::fmt::Debug for AudioFileReader {
 
 impl AudioFileReader {
     /// Opens a file, probes its format and decodes the first block so the output format is known.
-    pub fn open(path: impl AsRef<Path>) -> Result<Self, DecodeError> {
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, OfflineError> {
         let path = path.as_ref().to_path_buf();
         let file = open_file(&path)?;
 
@@ -159,7 +107,7 @@ impl AudioFileReader {
         };
 
         let Some(track) = format.default_track(TrackType::Audio) else {
-            return Err(DecodeError::Unsupported {
+            return Err(OfflineError::Unsupported {
                 path,
                 reason: "no audio track".into(),
             });
@@ -167,7 +115,7 @@ impl AudioFileReader {
         let track_id = track.id;
         let total_frames = track.num_frames;
         let Some(params) = track.codec_params.as_ref().and_then(|p| p.audio()) else {
-            return Err(DecodeError::Unsupported {
+            return Err(OfflineError::Unsupported {
                 path,
                 reason: "audio track without codec parameters".into(),
             });
@@ -242,7 +190,7 @@ impl AudioFileReader {
     // Damaged packets are skipped and a stream that stops early just ends (see `skipped_packets`
     // and `truncated`), so after a successful `open` this currently never returns `Err`; the
     // `Result` leaves room for errors a later version may want to surface.
-    pub fn read_block(&mut self, out: &mut Vec<f32>) -> Result<usize, DecodeError> {
+    pub fn read_block(&mut self, out: &mut Vec<f32>) -> Result<usize, OfflineError> {
         if let Some(mut first) = self.pending.take() {
             std::mem::swap(out, &mut first);
             return Ok(out.len() / usize::from(self.channels));
@@ -337,18 +285,18 @@ impl AudioFileReader {
     }
 
     /// Explains why `open` saw no audio at all.
-    fn no_audio_error(self) -> DecodeError {
+    fn no_audio_error(self) -> OfflineError {
         let path = self.path;
         if self.panicked {
             return panic_error(&path);
         }
         match self.last_error {
-            None => DecodeError::Empty { path },
-            Some(SymphoniaError::Unsupported(what)) => DecodeError::Unsupported {
+            None => OfflineError::Empty { path },
+            Some(SymphoniaError::Unsupported(what)) => OfflineError::Unsupported {
                 path,
                 reason: what.to_string(),
             },
-            Some(err) => DecodeError::Corrupt {
+            Some(err) => OfflineError::Corrupt {
                 path,
                 reason: err.to_string(),
             },
@@ -357,7 +305,7 @@ impl AudioFileReader {
 }
 
 /// Decodes the default audio track of a file completely into memory.
-pub fn decode_file(path: &Path) -> Result<DecodedAudio, DecodeError> {
+pub fn decode_file(path: &Path) -> Result<DecodedAudio, OfflineError> {
     let mut reader = AudioFileReader::open(path)?;
     let channels = usize::from(reader.channels());
 
@@ -384,14 +332,14 @@ pub fn decode_file(path: &Path) -> Result<DecodedAudio, DecodeError> {
 }
 
 /// Opens the file, mapping the common failures to errors that say which file.
-fn open_file(path: &Path) -> Result<File, DecodeError> {
+fn open_file(path: &Path) -> Result<File, OfflineError> {
     let io_error = |error: io::Error| {
         if error.kind() == io::ErrorKind::NotFound {
-            DecodeError::NotFound {
+            OfflineError::NotFound {
                 path: path.to_path_buf(),
             }
         } else {
-            DecodeError::Io {
+            OfflineError::Io {
                 path: path.to_path_buf(),
                 error,
             }
@@ -407,26 +355,26 @@ fn open_file(path: &Path) -> Result<File, DecodeError> {
         )));
     }
     if meta.len() == 0 {
-        return Err(DecodeError::Empty {
+        return Err(OfflineError::Empty {
             path: path.to_path_buf(),
         });
     }
     File::open(path).map_err(io_error)
 }
 
-/// Maps an error from probing or decoder creation (nothing decoded yet) to a `DecodeError`.
-fn classify_setup_error(path: &Path, err: SymphoniaError) -> DecodeError {
+/// Maps an error from probing or decoder creation (nothing decoded yet) to a `OfflineError`.
+fn classify_setup_error(path: &Path, err: SymphoniaError) -> OfflineError {
     let path = path.to_path_buf();
     match err {
-        SymphoniaError::Unsupported(what) => DecodeError::Unsupported {
+        SymphoniaError::Unsupported(what) => OfflineError::Unsupported {
             path,
             reason: what.to_string(),
         },
         // Running out of bytes while parsing headers means a damaged file, not a read failure.
         SymphoniaError::IoError(error) if error.kind() != io::ErrorKind::UnexpectedEof => {
-            DecodeError::Io { path, error }
+            OfflineError::Io { path, error }
         }
-        other => DecodeError::Corrupt {
+        other => OfflineError::Corrupt {
             path,
             reason: other.to_string(),
         },
@@ -434,8 +382,8 @@ fn classify_setup_error(path: &Path, err: SymphoniaError) -> DecodeError {
 }
 
 /// The error reported when symphonia panicked on this file.
-fn panic_error(path: &Path) -> DecodeError {
-    DecodeError::Corrupt {
+fn panic_error(path: &Path) -> OfflineError {
+    OfflineError::Corrupt {
         path: path.to_path_buf(),
         reason: "the decoder crashed on this data".into(),
     }
@@ -514,11 +462,11 @@ mod tests {
         out
     }
 
-    fn assert_names_file(err: &DecodeError, path: &Path) {
+    fn assert_names_file(err: &OfflineError, path: &Path) {
         let shown = err.to_string();
         let name = path.file_name().unwrap().to_str().unwrap();
         assert!(shown.contains(name), "error {shown:?} does not name {name}");
-        assert_eq!(err.path(), path);
+        assert_eq!(err.path(), Some(path));
     }
 
     /// Small deterministic PRNG (xorshift64*), so the "random" inputs are reproducible.
@@ -598,7 +546,7 @@ mod tests {
     fn reader_can_move_to_another_thread() {
         fn assert_send<T: Send>() {}
         assert_send::<AudioFileReader>();
-        assert_send::<DecodeError>();
+        assert_send::<OfflineError>();
     }
 
     #[test]
@@ -606,7 +554,7 @@ mod tests {
         let path =
             std::env::temp_dir().join(format!("danced-decode-{}-missing.wav", std::process::id()));
         let err = decode_file(&path).unwrap_err();
-        assert!(matches!(err, DecodeError::NotFound { .. }), "{err:?}");
+        assert!(matches!(err, OfflineError::NotFound { .. }), "{err:?}");
         assert_names_file(&err, &path);
     }
 
@@ -614,7 +562,7 @@ mod tests {
     fn directory_is_io_error() {
         let dir = std::env::temp_dir();
         let err = decode_file(&dir).unwrap_err();
-        assert!(matches!(err, DecodeError::Io { .. }), "{err:?}");
+        assert!(matches!(err, OfflineError::Io { .. }), "{err:?}");
         assert!(err.to_string().contains(&*dir.to_string_lossy()));
     }
 
@@ -622,7 +570,7 @@ mod tests {
     fn empty_file_is_empty() {
         let file = TempFile::new("empty.wav", b"");
         let err = decode_file(&file.0).unwrap_err();
-        assert!(matches!(err, DecodeError::Empty { .. }), "{err:?}");
+        assert!(matches!(err, OfflineError::Empty { .. }), "{err:?}");
         assert_names_file(&err, &file.0);
     }
 
@@ -631,7 +579,7 @@ mod tests {
         let text = "This is not audio, just some notes.\n".repeat(50);
         let file = TempFile::new("notes.wav", text.as_bytes());
         let err = decode_file(&file.0).unwrap_err();
-        assert!(matches!(err, DecodeError::Unsupported { .. }), "{err:?}");
+        assert!(matches!(err, OfflineError::Unsupported { .. }), "{err:?}");
         assert_names_file(&err, &file.0);
     }
 
@@ -671,12 +619,12 @@ mod tests {
             let err = decode_file(&file.0).unwrap_err();
             if cut == 4 {
                 assert!(
-                    matches!(err, DecodeError::Unsupported { .. }),
+                    matches!(err, OfflineError::Unsupported { .. }),
                     "cut at {cut}: {err:?}"
                 );
             } else {
                 assert!(
-                    matches!(err, DecodeError::Corrupt { .. }),
+                    matches!(err, OfflineError::Corrupt { .. }),
                     "cut at {cut}: {err:?}"
                 );
             }
@@ -689,10 +637,10 @@ mod tests {
         for channels in [1, 2] {
             let file = TempFile::new("noframes.wav", &wav_bytes(48000, channels, &[], None));
             let err = decode_file(&file.0).unwrap_err();
-            assert!(matches!(err, DecodeError::Empty { .. }), "{err:?}");
+            assert!(matches!(err, OfflineError::Empty { .. }), "{err:?}");
             assert_names_file(&err, &file.0);
             let err = AudioFileReader::open(&file.0).unwrap_err();
-            assert!(matches!(err, DecodeError::Empty { .. }), "{err:?}");
+            assert!(matches!(err, OfflineError::Empty { .. }), "{err:?}");
         }
     }
 
@@ -701,7 +649,7 @@ mod tests {
         let file = TempFile::new("noise.mp3", &pseudo_random_bytes(0x5eed, 64 * 1024));
         let err = decode_file(&file.0).unwrap_err();
         // The probe scans for frame sync words by content and finds no run of valid MP3 frames.
-        assert!(matches!(err, DecodeError::Unsupported { .. }), "{err:?}");
+        assert!(matches!(err, OfflineError::Unsupported { .. }), "{err:?}");
         assert_names_file(&err, &file.0);
     }
 
@@ -758,7 +706,7 @@ mod tests {
         let err = decode_file(&file.0).unwrap_err();
         // Found by the Ogg demuxer, rejected for want of an Opus decoder (not by the probe).
         assert!(
-            matches!(&err, DecodeError::Unsupported { reason, .. } if reason.contains("codec")),
+            matches!(&err, OfflineError::Unsupported { reason, .. } if reason.contains("codec")),
             "{err:?}"
         );
         assert_names_file(&err, &file.0);
