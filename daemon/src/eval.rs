@@ -32,7 +32,7 @@ use model::source::{Controls, MotionSource};
 use model::tang2018::TANG_FPS;
 use offline::files::read_times;
 
-use crate::key_cue::{KeyCue, target_at};
+use crate::offline_dance::{KeyCue, target_at};
 
 /// Length of the windows kinetic features are computed on, frames (5 s at 25 fps).
 const KINETIC_WINDOW_FRAMES: usize = 125;
@@ -625,7 +625,7 @@ fn dance_with(
     let look = source.lookahead_frames();
     source.reset(seed);
     let frames = frames.min(music.len().saturating_sub(look));
-    crate::motion_lag::dance_stream(source, music, 0, frames, controls)
+    crate::offline_dance::dance_stream(source, music, 0, frames, controls)
 }
 
 /// Adds the style `classifier` names for each [`STYLE_WINDOW_S`] window of `motion` to `row`.
@@ -774,7 +774,7 @@ fn quiet_phrase_ratio(
 impl MusicSet {
     /// Analyses every song of `data/synth-beats` with the streaming analysis at 25 fps.
     pub fn load(data: &Path) -> Result<MusicSet> {
-        let set = crate::bench::synth_set(data);
+        let set = crate::bench::sets::synth_set(data);
         anyhow::ensure!(
             !set.items.is_empty(),
             "no songs under {}",
@@ -788,7 +788,7 @@ impl MusicSet {
                 &mut |_, _| {},
             )
             .with_context(|| format!("analysing {}", item.audio.display()))?;
-            let info = crate::bench::SynthSongInfo::read(&item.audio);
+            let info = crate::bench::sets::SynthSongInfo::read(&item.audio);
             let bpm = info.as_ref().map_or(0.0, |i| i.bpm);
             let off_beats = half_beat_later(&item.beats);
             songs.push(MusicSong {

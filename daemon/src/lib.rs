@@ -5,18 +5,13 @@
 #![warn(missing_docs)]
 
 pub mod alloc_counter;
-pub mod bar_cue;
-pub mod beat_recovery;
 pub mod bench;
 pub mod command;
 pub mod dancer;
 pub mod demo_track;
 pub mod eval;
 pub mod frame;
-pub mod key_cue;
 pub mod live;
-pub mod live_cli;
-pub mod motion_lag;
-pub mod plot;
+pub mod offline_dance;
 pub mod pose_bank;
 pub mod view;

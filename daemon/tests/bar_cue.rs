@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
-use daemon::bar_cue::measure_bar_cues;
+use daemon::bench::cues::measure_bar_cues;
+use daemon::bench::lag::LagRun;
 use daemon::live::replay::ReplayAudio;
-use daemon::motion_lag::LagRun;
 
 /// Looser than the benchmark's 70 ms: a loaded 2-core machine may deliver a frame late. A cue
 /// counted on the wrong beat of the bar misses by a whole beat (≥ 350 ms at these tempi).
@@ -15,8 +15,8 @@ const TOLERANCE_S: f64 = 0.1;
 #[test]
 fn key_poses_cued_on_the_next_bar_land_on_downbeats() {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    let set = daemon::bench::synth_set(&data);
-    let steady = daemon::bench::steady_songs(&set);
+    let set = daemon::bench::sets::synth_set(&data);
+    let steady = daemon::bench::sets::steady_songs(&set);
     // A 4/4 song in the middle of the tempo range; every rendered set has some.
     let Some((bpm, item)) = steady
         .iter()

@@ -3,9 +3,9 @@
 //! by at most a few ms at lead 0, and an output lead of 50 ms moves it 50 ms ahead. Only gross
 //! failures here (a loaded 2-core machine); `danced bench lag` measures the exact figures.
 
+use daemon::bench::lag::{LagRun, measure_live_lag, offline_reference};
 use daemon::dancer::{SourceKind, SourceSettings, open_source};
 use daemon::live::replay::ReplayAudio;
-use daemon::motion_lag::{LagRun, measure_live_lag, offline_reference};
 use offline::analysis::{AnalyzeOptions, analyze_samples};
 
 /// Seconds of the demo song replayed, and left out while the tracker locks on.

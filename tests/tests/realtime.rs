@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use daemon::alloc_counter::{self, RtThread};
 use daemon::live::config::Config;
+use daemon::live::run::{AudioSource, RunMode, run_live};
 use daemon::live::stats::{StatsReport, ThreadAllocations};
-use daemon::live_cli::{AudioSource, RunMode, run_live};
 use rosc::{OscMessage, OscPacket, OscType};
 
 #[global_allocator]

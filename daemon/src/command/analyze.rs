@@ -10,8 +10,10 @@ use offline::analysis::{AnalyzeOptions, analyze_file, analyze_samples};
 use offline::files::{beats_text, features_npy, features_sidecar, onsets_text, write_atomic};
 use offline::progress::audio_bar;
 
-use crate::bench;
+use crate::bench::beats::MAX_DECISION_LAG_S;
 use crate::command::tracker::TrackerArg;
+
+pub mod plot;
 
 #[derive(clap::Args, Debug)]
 /// Options of `danced analyze`.
@@ -108,13 +110,13 @@ pub fn analyze(args: AnalyzeArgs) -> Result<()> {
                 .map(|v| v.get_name().to_string())
                 .unwrap_or_default()
         );
-        crate::plot::plot_analysis(&a, &title, p)?;
+        plot::plot_analysis(&a, &title, p)?;
     }
 
     let late = a
         .beats
         .iter()
-        .filter(|b| b.decided_at_s - b.time_s > bench::MAX_DECISION_LAG_S)
+        .filter(|b| b.decided_at_s - b.time_s > MAX_DECISION_LAG_S)
         .count();
     let downbeats = a.beats.iter().filter(|b| b.beat_in_bar == 1).count();
     let meter = a.beats.last().map(|b| b.beats_per_bar).unwrap_or(0);

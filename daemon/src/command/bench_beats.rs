@@ -6,7 +6,7 @@ use anyhow::{Result, bail};
 use dsp::BeatTrackerKind;
 use offline::progress::count_bar;
 
-use crate::bench;
+use crate::bench::{beats, sets};
 use crate::command::tracker::TrackerArg;
 
 #[derive(clap::Args, Debug)]
@@ -65,12 +65,12 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
             || dir.display().to_string(),
             |n| n.to_string_lossy().into_owned(),
         );
-        bench::rendered_set(&name, dir)
+        sets::rendered_set(&name, dir)
     });
-    let sets: Vec<bench::BenchSet> = [
-        bench::synth_set(&args.data),
-        bench::tang_set(&args.data),
-        bench::madmom_set(&args.data),
+    let sets: Vec<sets::BenchSet> = [
+        sets::synth_set(&args.data),
+        sets::tang_set(&args.data),
+        sets::madmom_set(&args.data),
     ]
     .into_iter()
     .chain(extra)
@@ -100,7 +100,7 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
                 bar_params,
                 ..Default::default()
             };
-            let scores = bench::run_set(set, options, args.jobs, &|name| {
+            let scores = beats::run_set(set, options, args.jobs, &|name| {
                 pb.set_message(name.to_string());
                 pb.inc(1);
             });
@@ -116,7 +116,7 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
             if scores.iter().any(|s| s.downbeat_f.is_some()) {
                 extra += &format!(
                     ", downbeat F {:.3}",
-                    bench::mean(&scores, |s| s.downbeat_f.unwrap_or(0.0))
+                    beats::mean(&scores, |s| s.downbeat_f.unwrap_or(0.0))
                 );
                 let weak = scores
                     .iter()
@@ -132,27 +132,27 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
                 extra += &format!(
                     ", meter right on {right} of {} songs ({:.1} % of beats)",
                     scores.len(),
-                    100.0 * bench::mean(&scores, |s| s.meter_right.unwrap_or(0.0))
+                    100.0 * beats::mean(&scores, |s| s.meter_right.unwrap_or(0.0))
                 );
             }
             if scores.iter().any(|s| s.onset_f.is_some()) {
                 extra += &format!(
                     ", onset F {:.3}",
-                    bench::mean(&scores, |s| s.onset_f.unwrap_or(0.0))
+                    beats::mean(&scores, |s| s.onset_f.unwrap_or(0.0))
                 );
             }
             row.push(format!(
                 "{:.3} / {:.3} / {:.3}{extra}",
-                bench::mean(&scores, |s| s.f_measure),
-                bench::mean(&scores, |s| s.cmlt),
-                bench::mean(&scores, |s| s.amlt)
+                beats::mean(&scores, |s| s.f_measure),
+                beats::mean(&scores, |s| s.cmlt),
+                beats::mean(&scores, |s| s.amlt)
             ));
             if args.verbose {
-                details.push_str(&bench::detail_table(set, tracker, &scores));
+                details.push_str(&beats::detail_table(set, tracker, &scores));
             }
             all.extend(scores);
         }
-        row.push(format!("{:.0}", bench::speed(&all)));
+        row.push(format!("{:.0}", beats::speed(&all)));
         rows.push(row);
     }
     pb.finish_and_clear();
@@ -160,7 +160,7 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
     println!();
     println!(
         "Beats decided ≤ {:.0} ms after they happen; mean F / CMLt / AMLt (±70 ms, first 5 s skipped).",
-        bench::MAX_DECISION_LAG_S * 1000.0
+        beats::MAX_DECISION_LAG_S * 1000.0
     );
     println!(
         "A song's meter is right when ≥ {:.0} % of its beats after the first four bars report it.",

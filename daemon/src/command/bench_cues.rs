@@ -1,13 +1,13 @@
 //! `danced bench cues`: key poses cued "on the next bar" during real-time replays of rendered
-//! songs, measured from outside (`crate::bar_cue`): where each lands against the true downbeats.
+//! songs, measured from outside (`crate::bench::cues`): where each lands against the true downbeats.
 
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 
-use crate::bar_cue::{CueLanding, HIT_TOLERANCE_S, measure_bar_cues};
+use crate::bench::cues::{CueLanding, HIT_TOLERANCE_S, measure_bar_cues};
+use crate::bench::lag::LagRun;
 use crate::live::replay::ReplayAudio;
-use crate::motion_lag::LagRun;
 
 /// Options of `danced bench cues`.
 #[derive(clap::Args, Debug)]
@@ -38,10 +38,10 @@ pub struct BenchCuesArgs {
 /// Runs `danced bench cues`.
 pub fn bench_cues(args: BenchCuesArgs) -> Result<()> {
     let set = match &args.songs {
-        Some(dir) => crate::bench::rendered_set("songs", dir),
-        None => crate::bench::synth_set(&args.data),
+        Some(dir) => crate::bench::sets::rendered_set("songs", dir),
+        None => crate::bench::sets::synth_set(&args.data),
     };
-    let steady = crate::bench::steady_songs(&set);
+    let steady = crate::bench::sets::steady_songs(&set);
     if steady.is_empty() {
         bail!("no constant-tempo rendered songs found (pass --data or --songs)");
     }

@@ -1,5 +1,5 @@
 //! `danced bench lag`: how far the dancer a receiver sees trails the music a listener hears,
-//! measured from outside (`crate::motion_lag`), per song, dancer and output lead; and how long
+//! measured from outside (`crate::bench::lag`), per song, dancer and output lead; and how long
 //! the dancer's beat takes to come back after a sudden tempo change.
 
 use std::path::PathBuf;
@@ -7,11 +7,12 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use offline::analysis::{AnalyzeOptions, analyze_samples};
 
+use crate::bench::lag::{LagRun, measure_live_lag, offline_reference};
 use crate::command::source::SourceArgs;
 use crate::dancer::{SourceKind, SourceSettings, open_source};
 use crate::live::config::Config;
 use crate::live::replay::ReplayAudio;
-use crate::motion_lag::{LagRun, dance_stream, measure_live_lag, offline_reference};
+use crate::offline_dance::dance_stream;
 
 /// Options of `danced bench lag`.
 #[derive(clap::Args, Debug)]
@@ -72,7 +73,7 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
             })
             .collect();
     }
-    let set = crate::bench::synth_set(&args.data);
+    let set = crate::bench::sets::synth_set(&args.data);
     if set.items.is_empty() {
         eprintln!(
             "no songs under {} — measuring the built-in demo song",
@@ -84,7 +85,7 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
             audio: ReplayAudio::demo(args.seconds + 1.0),
         }]);
     }
-    let steady = crate::bench::steady_songs(&set);
+    let steady = crate::bench::sets::steady_songs(&set);
     let n = args.songs.max(1).min(steady.len());
     let picked: Vec<_> = (0..n)
         .map(|k| steady[k * (steady.len() - 1) / (n - 1).max(1)])
@@ -101,8 +102,8 @@ fn songs(args: &BenchLagArgs) -> Result<Vec<Song>> {
         .collect()
 }
 
-fn song_info(item: &crate::bench::BenchItem) -> Option<crate::bench::SynthSongInfo> {
-    crate::bench::SynthSongInfo::read(&item.audio)
+fn song_info(item: &crate::bench::sets::BenchItem) -> Option<crate::bench::sets::SynthSongInfo> {
+    crate::bench::sets::SynthSongInfo::read(&item.audio)
 }
 
 /// A song that may be joined to another: tempo, name, audio, beats, quiet section.
@@ -117,9 +118,9 @@ const ON_BEAT_S: f64 = 0.02;
 /// The tempo-jump table: songs of contrasting tempo joined on a beat, each dancer offline
 /// (the live path hears exactly the same, see the lag table).
 fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
-    use crate::beat_recovery::{dancer_beat_errors, largest_step_m, recovery_s};
-    let set = crate::bench::synth_set(&args.data);
-    let mut cases: Vec<(String, crate::beat_recovery::Splice)> = Vec::new();
+    use crate::bench::beat_recovery::{dancer_beat_errors, largest_step_m, recovery_s};
+    let set = crate::bench::sets::synth_set(&args.data);
+    let mut cases: Vec<(String, crate::bench::beat_recovery::Splice)> = Vec::new();
     // Songs rendered with a tempo jump of their own.
     for item in &set.items {
         let Some(info) = song_info(item) else {
@@ -136,8 +137,8 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
                     .map_or(f64::NAN, |w| w[1] - w[0]);
             cases.push((
                 format!("{:.0} → {end_bpm:.0} BPM (in {})", info.bpm, item.name),
-                crate::beat_recovery::Splice {
-                    samples: crate::beat_recovery::mono(&a.samples, a.channels),
+                crate::bench::beat_recovery::Splice {
+                    samples: crate::bench::beat_recovery::mono(&a.samples, a.channels),
                     sample_rate: a.sample_rate,
                     beats: item.beats.clone(),
                     cut_s,
@@ -175,7 +176,7 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
             {
                 continue;
             }
-            let Some(s) = crate::beat_recovery::splice(
+            let Some(s) = crate::bench::beat_recovery::splice(
                 (&a.2.samples, a.2.channels, &a.3),
                 (&b.2.samples, b.2.channels, &b.3),
                 a.2.sample_rate,

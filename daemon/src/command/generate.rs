@@ -98,9 +98,9 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     };
     let mut cues = Vec::new();
     for spec in key_poses {
-        let (name, at) = crate::key_cue::parse_cue_spec(spec)?;
+        let (name, at) = crate::offline_dance::parse_cue_spec(spec)?;
         let rotations = bank_pose(&name)?.rotations;
-        cues.push(crate::key_cue::KeyCue {
+        cues.push(crate::offline_dance::KeyCue {
             name,
             rotations,
             frame: ((at - start) * fps).round().max(0.0) as usize,
@@ -171,14 +171,14 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     let horizon = model::horizon::offline_horizon(&*dancer);
     let music = dsp::predicted_stream(&a.features, horizon);
     let step_start = Instant::now();
-    let poses = crate::motion_lag::dance_stream(
+    let poses = crate::offline_dance::dance_stream(
         &mut *dancer,
         &music,
         horizon,
         music.len().min(limit),
         |i| Controls {
             temperature,
-            key_pose: crate::key_cue::target_at(&cues, i, lead_frames),
+            key_pose: crate::offline_dance::target_at(&cues, i, lead_frames),
             beat_accent: None,
             style,
             key_route: None,

@@ -7,7 +7,7 @@ use anyhow::Result;
 use crate::command::source::SourceArgs;
 use crate::command::view_flag::ViewFlag;
 use crate::live::config::Config;
-use crate::live_cli::{AudioSource, RunMode, run_live, summary};
+use crate::live::run::{AudioSource, RunMode, run_live, summary};
 
 #[derive(clap::Args, Debug)]
 /// Options of `danced run`.

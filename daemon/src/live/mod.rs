@@ -1,5 +1,6 @@
 //! The live pipeline: audio in (sound card or file replay) → ring → analysis → motion →
-//! paced sender → [`sink::FrameSink`], with live controls, stats and a status line.
+//! paced sender → [`sink::FrameSink`], with live controls, stats and a status line; [`run`]
+//! wires a whole run (config, audio, dancer, outputs, view) for the commands that dance live.
 
 pub mod analysis;
 pub mod beat_clock;
@@ -15,6 +16,7 @@ pub mod pipeline;
 pub mod priority;
 pub mod replay;
 pub mod ring;
+pub mod run;
 pub mod scheduler;
 pub mod sink;
 pub mod stats;

@@ -1,7 +1,7 @@
 //! Key poses cued "on the next bar", measured from outside: a song is replayed in real time,
 //! cues go in through the control path at chosen heard times, and the motion is received over
 //! UDP (native OSC) and put on the replay clock, as for the motion lag
-//! ([`crate::motion_lag`]). A dancer that stands still and snaps into each key pose on the
+//! ([`super::lag`]). A dancer that stands still and snaps into each key pose on the
 //! frame it is due shows exactly when the pipeline made the pose land; that time is compared
 //! with the song's true downbeats.
 
@@ -10,9 +10,9 @@ use glam::{Quat, Vec3};
 use model::rig::{JOINT_COUNT, Joint, Pose};
 use model::source::{Controls, MotionSource};
 
+use super::lag::{BodyShape, LagRun, body_shapes, replay_and_receive};
 use crate::live::sink::MemoryPoseBank;
 use crate::live::wire::{ControlEvent, Quantize};
-use crate::motion_lag::{BodyShape, LagRun, body_shapes, replay_and_receive};
 
 /// A cue counts as on the bar when it lands within this of a true downbeat, seconds.
 pub const HIT_TOLERANCE_S: f64 = 0.07;

@@ -22,6 +22,7 @@ use crate::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
 use crate::live::replay::{self, ReplayAudio, ReplaySettings};
 use crate::live::sink::MemoryPoseBank;
 use crate::live::wire::ControlEvent;
+use crate::offline_dance::dance_stream;
 
 /// Joint positions of one frame relative to the hips (Unity coordinates, metres).
 pub type BodyShape = Vec<Vec3>;
@@ -35,32 +36,6 @@ pub struct LagEstimate {
     pub correlation: f64,
     /// Received frames compared.
     pub frames: usize,
-}
-
-/// Steps `source` through `music` (a predicted stream, `dsp::predicted_stream` over `horizon`)
-/// as the live pipeline does: the first step makes frame `horizon` (live has no earlier pose;
-/// earlier frames hold it), each later frame one step; `controls` gives each frame's controls.
-pub fn dance_stream(
-    source: &mut dyn MotionSource,
-    music: &[[f32; dsp::feature::FEATURE_DIM]],
-    horizon: usize,
-    frames: usize,
-    mut controls: impl FnMut(usize) -> Controls,
-) -> Vec<Pose> {
-    let look = source.lookahead_frames();
-    let frames = frames.min(music.len());
-    let mut pose = Pose::rest();
-    let mut out = Vec::with_capacity(frames);
-    for i in horizon.min(frames)..frames {
-        // The frame and its look-ahead (shorter at the end).
-        let window = &music[i..(i + look + 1).min(music.len())];
-        source.step(window, &controls(i), &mut pose);
-        if out.is_empty() {
-            out.resize(i, pose);
-        }
-        out.push(pose);
-    }
-    out
 }
 
 /// The offline reference for a live run at `lead_ms`: `features` (the song's analysis) danced

@@ -7,16 +7,16 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 
-use crate::live::capture::{self, CaptureSettings};
-use crate::live::config::Config;
-use crate::live::context::LiveContext;
-use crate::live::control_queue::ControlHub;
-use crate::live::io::{ControlInputs, OscSink};
-use crate::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
-use crate::live::replay::{self, ReplayAudio, ReplaySettings};
-use crate::live::sink::FrameSink;
-use crate::live::stats::StatsReport;
-use crate::live::status::StatusPrinter;
+use super::capture::{self, CaptureSettings};
+use super::config::Config;
+use super::context::LiveContext;
+use super::control_queue::ControlHub;
+use super::io::{ControlInputs, OscSink};
+use super::pipeline::{Pipeline, PipelineParts, PipelineSettings};
+use super::replay::{self, ReplayAudio, ReplaySettings};
+use super::sink::FrameSink;
+use super::stats::StatsReport;
+use super::status::StatusPrinter;
 use crate::view::assets::Assets;
 use crate::view::{LiveFeed, SinkPair, ViewHello, ViewServer};
 

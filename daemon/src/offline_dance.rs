@@ -1,10 +1,38 @@
-//! Key poses on a timeline, for offline generation and evaluation: "reach `pose-3` at 12.5 s",
-//! announced a fixed lead before, as the live daemon announces one quantised to a coming beat.
+//! Dancing to a whole song at once (`danced generate`, `danced eval`, the lag bench's offline
+//! reference): the source stepped through the music exactly as the live pipeline hands it over
+//! ([`dance_stream`]), with key poses on a timeline: "reach `pose-3` at 12.5 s", announced a
+//! fixed lead before, as the live daemon announces one quantised to a coming beat.
 
 use anyhow::{Context, Result, bail};
 use glam::Quat;
-use model::rig::JOINT_COUNT;
-use model::source::KeyPoseTarget;
+use model::rig::{JOINT_COUNT, Pose};
+use model::source::{Controls, KeyPoseTarget, MotionSource};
+
+/// Steps `source` through `music` (a predicted stream, `dsp::predicted_stream` over `horizon`)
+/// as the live pipeline does: the first step makes frame `horizon` (live has no earlier pose;
+/// earlier frames hold it), each later frame one step; `controls` gives each frame's controls.
+pub fn dance_stream(
+    source: &mut dyn MotionSource,
+    music: &[[f32; dsp::feature::FEATURE_DIM]],
+    horizon: usize,
+    frames: usize,
+    mut controls: impl FnMut(usize) -> Controls,
+) -> Vec<Pose> {
+    let look = source.lookahead_frames();
+    let frames = frames.min(music.len());
+    let mut pose = Pose::rest();
+    let mut out = Vec::with_capacity(frames);
+    for i in horizon.min(frames)..frames {
+        // The frame and its look-ahead (shorter at the end).
+        let window = &music[i..(i + look + 1).min(music.len())];
+        source.step(window, &controls(i), &mut pose);
+        if out.is_empty() {
+            out.resize(i, pose);
+        }
+        out.push(pose);
+    }
+    out
+}
 
 /// One key pose to reach at a moment.
 #[derive(Clone, Debug, PartialEq)]

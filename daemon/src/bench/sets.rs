@@ -1,17 +1,13 @@
-//! `danced bench beats`: the native and aubio trackers side by side on three annotated sets.
+//! The annotated recordings the benches and the evaluation measure on: songs rendered with
+//! exact beats and bars (`data/synth-beats`), the tang2018 songs against their reference beats,
+//! and the hand-annotated madmom recording.
 
-use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use dsp::BeatTrackerKind;
-use dsp::metrics::{self, BEAT_TOLERANCE_S, ONSET_TOLERANCE_S};
-
-use offline::analysis::{AnalyzeOptions, FileAnalysis, analyze_file};
+use dsp::metrics;
 use offline::files::{read_beat_positions, read_times};
 
-/// A beat counts only if the tracker committed to it no later than this after it happened.
-pub const MAX_DECISION_LAG_S: f64 = 0.05;
 /// tang2018 music frames per second (for `config.json` spans).
 const TANG_FPS: f64 = 25.0;
 
@@ -43,44 +39,6 @@ pub struct BenchSet {
     pub name: String,
     /// Its recordings.
     pub items: Vec<BenchItem>,
-}
-
-/// Scores of one tracker on one recording.
-#[derive(Clone, Debug, Default)]
-pub struct ItemScore {
-    /// Recording name.
-    pub name: String,
-    /// Beat F-measure over beats decided in time.
-    pub f_measure: f64,
-    /// CMLt over the same beats.
-    pub cmlt: f64,
-    /// AMLt over the same beats.
-    pub amlt: f64,
-    /// Onset F-measure, where onsets are annotated.
-    pub onset_f: Option<f64>,
-    /// Downbeat F-measure (±70 ms), where downbeats are annotated.
-    pub downbeat_f: Option<f64>,
-    /// Beats dropped for being decided too late.
-    pub late_beats: usize,
-    /// Beats emitted.
-    pub beats: usize,
-    /// Median decision lag of the beats, seconds.
-    pub median_lag_s: f64,
-    /// Median reported tempo, BPM.
-    pub tempo_bpm: f64,
-    /// Beats per bar most often reported over the scored span.
-    pub meter: usize,
-    /// Share of the timely beats after the first four annotated bars that report the
-    /// annotated meter, where it is annotated.
-    pub meter_right: Option<f64>,
-    /// Mean bar confidence the tracker reported over those beats.
-    pub bar_confidence: f64,
-    /// Audio seconds.
-    pub duration_s: f64,
-    /// Analyzer seconds.
-    pub analysis_s: f64,
-    /// Error text if the file failed.
-    pub error: Option<String>,
 }
 
 fn sorted_dir(dir: &Path) -> Vec<PathBuf> {
@@ -269,180 +227,6 @@ fn read_downbeats(path: &Path) -> Option<Vec<f64>> {
             .map(|(t, _)| t)
             .collect(),
     )
-}
-
-fn in_span(times: &[f64], span: Option<(f64, f64)>) -> Vec<f64> {
-    match span {
-        None => times.to_vec(),
-        Some((a, b)) => times
-            .iter()
-            .filter(|&&t| t >= a && t <= b)
-            .map(|t| t - a)
-            .collect(),
-    }
-}
-
-/// Scores one analysis against one item.
-pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
-    let timely: Vec<f64> = analysis
-        .beats
-        .iter()
-        .filter(|b| b.decided_at_s - b.time_s <= MAX_DECISION_LAG_S)
-        .map(|b| b.time_s)
-        .collect();
-    let mut lags: Vec<f64> = analysis
-        .beats
-        .iter()
-        .map(|b| b.decided_at_s - b.time_s)
-        .collect();
-    lags.sort_by(f64::total_cmp);
-    let reference = in_span(&item.beats, item.span);
-    let estimated = in_span(&timely, item.span);
-    let reference = metrics::trim_beats(&reference, item.skip_s);
-    let estimated = metrics::trim_beats(&estimated, item.skip_s);
-    let f_measure = metrics::beat_f_measure(&reference, &estimated, BEAT_TOLERANCE_S);
-    let c = metrics::continuity(&reference, &estimated);
-    let downbeat_f = item.downbeats.as_ref().map(|r| {
-        let est: Vec<f64> = analysis
-            .beats
-            .iter()
-            .filter(|b| b.beat_in_bar == 1 && b.decided_at_s - b.time_s <= MAX_DECISION_LAG_S)
-            .map(|b| b.time_s)
-            .collect();
-        let r = metrics::trim_beats(&in_span(r, item.span), item.skip_s);
-        let e = metrics::trim_beats(&in_span(&est, item.span), item.skip_s);
-        metrics::beat_f_measure(&r, &e, BEAT_TOLERANCE_S)
-    });
-    // The meter counts from the fifth annotated bar on.
-    let meter_from_s = item
-        .meter
-        .and_then(|m| item.beats.get(4 * m).copied())
-        .unwrap_or(f64::INFINITY);
-    let counted: Vec<&dsp::BeatEvent> = analysis
-        .beats
-        .iter()
-        .filter(|b| b.decided_at_s - b.time_s <= MAX_DECISION_LAG_S && b.time_s >= meter_from_s)
-        .collect();
-    let meter_right = item.meter.map(|m| {
-        let right = counted.iter().filter(|b| b.beats_per_bar == m).count();
-        right as f64 / counted.len().max(1) as f64
-    });
-    let bar_confidence = counted
-        .iter()
-        .map(|b| f64::from(b.bar_confidence))
-        .sum::<f64>()
-        / counted.len().max(1) as f64;
-    let onset_f = item.onsets.as_ref().map(|r| {
-        let est: Vec<f64> = analysis.onsets.iter().map(|o| o.time_s).collect();
-        metrics::onset_f_measure(r, &est, ONSET_TOLERANCE_S).f_measure
-    });
-    ItemScore {
-        name: item.name.clone(),
-        f_measure,
-        cmlt: c.cmlt,
-        amlt: c.amlt,
-        onset_f,
-        downbeat_f,
-        late_beats: analysis.beats.len() - timely.len(),
-        beats: analysis.beats.len(),
-        median_lag_s: lags.get(lags.len() / 2).copied().unwrap_or(0.0),
-        tempo_bpm: analysis.median_tempo(),
-        meter: {
-            let threes = analysis
-                .beats
-                .iter()
-                .filter(|b| b.beats_per_bar == 3)
-                .count();
-            if analysis.beats.is_empty() {
-                0
-            } else if 2 * threes > analysis.beats.len() {
-                3
-            } else {
-                4
-            }
-        },
-        meter_right,
-        bar_confidence,
-        duration_s: analysis.duration_s,
-        analysis_s: analysis.analysis_time.as_secs_f64(),
-        error: None,
-    }
-}
-
-/// Runs one tracker over a set with `jobs` worker threads (each analysis runs on one thread).
-pub fn run_set(
-    set: &BenchSet,
-    options: AnalyzeOptions,
-    jobs: usize,
-    progress: &(dyn Fn(&str) + Sync),
-) -> Vec<ItemScore> {
-    offline::pool::parallel_map(&set.items, jobs, |item| {
-        let r = match analyze_file(&item.audio, options, &mut |_, _| {}) {
-            Ok(a) => score(item, &a),
-            Err(e) => ItemScore {
-                name: item.name.clone(),
-                error: Some(e.to_string()),
-                ..Default::default()
-            },
-        };
-        progress(&item.name);
-        r
-    })
-}
-
-/// Mean of a field over the scores that did not fail.
-pub fn mean(scores: &[ItemScore], f: impl Fn(&ItemScore) -> f64) -> f64 {
-    let ok: Vec<f64> = scores.iter().filter(|s| s.error.is_none()).map(f).collect();
-    if ok.is_empty() {
-        0.0
-    } else {
-        ok.iter().sum::<f64>() / ok.len() as f64
-    }
-}
-
-/// Audio seconds per analyzer second over the scores.
-pub fn speed(scores: &[ItemScore]) -> f64 {
-    let a: f64 = scores.iter().map(|s| s.analysis_s).sum();
-    let d: f64 = scores.iter().map(|s| s.duration_s).sum();
-    d / a.max(1e-9)
-}
-
-/// A per-file table of one tracker on one set.
-pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScore]) -> String {
-    let mut out = String::new();
-    let _ = writeln!(out, "\n{} — {}", set.name, tracker.name());
-    let _ = writeln!(
-        out,
-        "| file | F | CMLt | AMLt | downbeat F | meter | meter right | bar confidence | tempo | beats | late | lag p50 ms |"
-    );
-    let _ = writeln!(
-        out,
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
-    );
-    for s in scores {
-        if let Some(e) = &s.error {
-            let _ = writeln!(out, "| {} | error: {e} |", s.name);
-            continue;
-        }
-        let _ = writeln!(
-            out,
-            "| {} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.2} | {:.1} | {} | {} | {:.0} |",
-            s.name,
-            s.f_measure,
-            s.cmlt,
-            s.amlt,
-            s.downbeat_f.map_or("–".to_string(), |f| format!("{f:.3}")),
-            s.meter,
-            s.meter_right
-                .map_or("–".to_string(), |f| format!("{:.0} %", 100.0 * f)),
-            s.bar_confidence,
-            s.tempo_bpm,
-            s.beats,
-            s.late_beats,
-            s.median_lag_s * 1000.0
-        );
-    }
-    out
 }
 
 /// The set's constant-tempo songs without a drumless intro, 70–170 BPM, slowest first.
