@@ -54,7 +54,7 @@ impl Default for BarPointerParams {
 
 impl BarPointerParams {
     /// These parameters with `name=value` overrides applied (comma-separated, for tuning).
-    pub fn with_overrides(mut self, spec: &str) -> Result<Self, String> {
+    pub fn with_overrides(mut self, spec: &str) -> Result<Self, crate::DspError> {
         for (name, v) in crate::tuning::overrides(spec)? {
             let v = v as f32;
             let slot = match name {
@@ -67,10 +67,16 @@ impl BarPointerParams {
                 "half_time" => &mut self.half_time,
                 "double_time" => &mut self.double_time,
                 "tempo_jump" => &mut self.tempo_jump,
-                other => return Err(format!("unknown bar pointer parameter '{other}'")),
+                other => {
+                    return Err(crate::DspError::Tuning(format!(
+                        "unknown bar pointer parameter '{other}'"
+                    )));
+                }
             };
             if !v.is_finite() || v < 0.0 {
-                return Err(format!("{name} must be a finite number ≥ 0"));
+                return Err(crate::DspError::Tuning(format!(
+                    "{name} must be a finite number ≥ 0"
+                )));
             }
             *slot = v;
         }

@@ -91,7 +91,7 @@ impl Default for BeatTrackerParams {
 impl BeatTrackerParams {
     /// Applies `name=value` overrides separated by commas (for tuning runs); unknown names or
     /// unparsable values are reported back.
-    pub fn with_overrides(mut self, spec: &str) -> Result<Self, String> {
+    pub fn with_overrides(mut self, spec: &str) -> Result<Self, crate::DspError> {
         for (k, x) in crate::tuning::overrides(spec)? {
             match k {
                 "min_bpm" => self.min_bpm = x.clamp(20.0, 300.0),
@@ -110,7 +110,11 @@ impl BeatTrackerParams {
                 "observation_power" => self.observation_power = x,
                 "activation_weight" => self.activation_weight = x.clamp(0.0, 1.0),
                 "activation_power" => self.activation_power = x,
-                other => return Err(format!("unknown beat tracker parameter {other:?}")),
+                other => {
+                    return Err(crate::DspError::Tuning(format!(
+                        "unknown beat tracker parameter {other:?}"
+                    )));
+                }
             }
         }
         Ok(self)

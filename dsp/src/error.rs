@@ -26,4 +26,8 @@ pub enum DspError {
     /// The aubio library refused to build one of its objects.
     #[error("aubio: {0}")]
     Aubio(String),
+    /// A tuning override list (`name=value, ...`) holds an item that is not `name=value`, a
+    /// value that is not a number or out of range, or a name the component does not have.
+    #[error("{0}")]
+    Tuning(String),
 }

@@ -80,12 +80,8 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
     if sets.is_empty() {
         bail!("no annotated audio found under {}", args.data.display());
     }
-    let beat_params = dsp::beat::BeatTrackerParams::default()
-        .with_overrides(&args.beat_params)
-        .map_err(anyhow::Error::msg)?;
-    let bar_params = dsp::BarPointerParams::default()
-        .with_overrides(&args.bar_params)
-        .map_err(anyhow::Error::msg)?;
+    let beat_params = dsp::beat::BeatTrackerParams::default().with_overrides(&args.beat_params)?;
+    let bar_params = dsp::BarPointerParams::default().with_overrides(&args.bar_params)?;
     let total: usize = sets.iter().map(|s| s.items.len()).sum::<usize>() * trackers.len();
     let pb = count_bar(total as u64);
     let mut rows = Vec::new();
