@@ -5,7 +5,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
-use training::command::{beats, dancer, downbeats, key_probe};
+use training::command::{beats, dancer, downbeats};
 
 /// Trains danced's networks: the neural dancer, the learned beat activation and the
 /// downbeat network.
@@ -18,14 +18,12 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Train the neural dancer on the tang2018 dances.
+    /// Train the neural dancer by a recipe (default: the shipped dancer's) on the tang2018 dances.
     Dancer(Box<dancer::TrainArgs>),
     /// Train the learned beat activation on songs with exact beats (e.g. rendered ones).
     Beats(beats::TrainBeatsArgs),
     /// Train the downbeat network on songs whose beats carry their position in the bar.
     Downbeats(downbeats::TrainDownbeatsArgs),
-    /// Measure, teacher-forced, how much a key pose informs the frames before it.
-    KeyProbe(key_probe::KeyProbeArgs),
 }
 
 fn main() -> Result<()> {
@@ -39,6 +37,5 @@ fn main() -> Result<()> {
         Command::Dancer(args) => dancer::train(&args),
         Command::Beats(args) => beats::train_beats(&args),
         Command::Downbeats(args) => downbeats::train_downbeats(&args),
-        Command::KeyProbe(args) => key_probe::key_probe(&args),
     }
 }

@@ -6,25 +6,15 @@ use burn::tensor::{Device, Tensor};
 
 use crate::body_shape::BodyShape;
 use crate::flow::Flow;
-use crate::layers::{Dense, WeightRows};
+use crate::layers::WeightRows;
 use crate::transformer::Transformer;
 use model::motion::{MOTION_FEATURE_DIM, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::tensors::{NamedTensors, WeightError};
 use model::neural::token::{
     FLAG_AT, FTG_AT, KEY_AT, KEY_CONDITION_CLAMP, KEY_CONDITION_DIM, KEY_ROT_DIM, LEVEL_AT,
-    MUSIC_AT, POSE_AT, TOKEN_DIM,
+    POSE_AT, TOKEN_DIM,
 };
-
-/// Horizons of the auxiliary heads, frames (0.2, 0.4 and 1 s at 25 fps): the context must
-/// predict where the dance will be, not only the next frame, which the past alone already
-/// predicts to the data's noise floor (so music and key poses added nothing to the one-step
-/// likelihood).
-pub const AUX_HORIZONS: [usize; 3] = [5, 10, 25];
-
-/// Log standard deviations of the auxiliary heads are kept in this range, so a feature the
-/// data holds constant cannot drive the loss to −∞.
-const AUX_LOG_SIGMA: (f32, f32) = (-5.0, 3.0);
 
 /// Normalised values of a key-pose rollout's poses are clamped to ± this before they are fed
 /// back (the live range clamp keeps poses within the training data's, a few σ).
@@ -32,15 +22,6 @@ pub const ROLLOUT_BOUND: f32 = 8.0;
 
 /// A key-pose rollout with a normalised value beyond ± this has exploded and is not scored.
 pub const ROLLOUT_EXPLODED: f32 = 1e3;
-
-/// With [`FreeRun::bounded`] a key-pose rollout's flow inverse stays finite, so an exploding
-/// sequence is left out instead of its infinities dropping the whole batch's rollout (a
-/// coupling's inverse gain of e^10 is far beyond a sampled pose's; values beyond ten times
-/// [`ROLLOUT_EXPLODED`] have exploded).
-pub const ROLLOUT_INVERSE_BOUND: crate::flow::InverseBound = crate::flow::InverseBound {
-    max_log_gain: 10.0,
-    max_value: 10.0 * ROLLOUT_EXPLODED,
-};
 
 /// Where and how [`Net::key_rollout`] free-runs.
 #[derive(Clone, Copy, Debug)]
@@ -59,8 +40,6 @@ pub struct FreeRun {
     /// g frames to go (so the pose is drawn onto the key gradually, not in one step); 0
     /// scores the key frame alone.
     pub approach: usize,
-    /// Hold the flow's inverse within [`ROLLOUT_INVERSE_BOUND`] (see `--rollout-bounded`).
-    pub bounded: bool,
 }
 
 /// What [`Net::key_rollout`] produced.
@@ -158,86 +137,33 @@ impl FreeRunOutcome {
     }
 }
 
-/// A group of a token's inputs, and the weights that read them alone (`danced-train dancer
-/// --train-only`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+/// A group of a token's inputs, and the weights that read them alone (a recipe stage's
+/// `train_only`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InputPath {
     /// The key pose, its count-down and flag: the embedding's rows for them and each flow
     /// coupling's key conditioning. Those inputs are zero on a token without a key, so these
     /// rows cannot change how the network dances with no key pending.
     Key,
-    /// The music features: the embedding's rows for them.
-    Music,
-    /// The relative level alone (`dsp::feature::FeatureLayout::RELATIVE_LEVEL`): its one
-    /// embedding row and, for a `level_to_flow` network, each flow coupling's row for it.
-    /// Steady music reads near 0 dB, so the frames these rows change most are those quieter
-    /// than the song's recent peak.
-    RelativeLevel,
-    /// The style input: the style embedding's rows (none for a network without one). A
-    /// token without a style reads none of them, so they cannot change how the network
-    /// dances unconditioned.
-    Style,
 }
 
-/// Transformer plus flow head, and (in training only) diagonal-Gaussian heads over the pose
-/// [`AUX_HORIZONS`] frames ahead.
+/// Transformer plus flow head.
 #[derive(Module, Debug)]
 pub struct Net {
     /// The causal transformer.
     pub transformer: Transformer,
     /// The flow over the next pose's normalised features.
     pub flow: Flow,
-    /// One head per [`AUX_HORIZONS`] entry: context → mean and log σ of that future pose.
-    /// Training-only: not stored in the model file (the live dancer samples the flow alone);
-    /// a resumed run starts them afresh.
-    pub aux: Vec<Dense>,
-}
-
-/// What one forward pass scores: the flow's NLL of the next pose per row `[b·s]`, and the
-/// auxiliary heads' Gaussian NLL per row, one tensor per horizon (empty without targets).
-pub struct Scores {
-    /// Next-pose NLL, nats per frame.
-    pub next: Tensor<1>,
-    /// Future-pose NLL per horizon, nats per frame.
-    pub aux: Vec<Tensor<1>>,
 }
 
 impl Net {
-    /// Builds the network from named tensors; the auxiliary heads start at zero (mean pose,
-    /// unit σ).
+    /// Builds the network from named tensors.
     pub fn load(t: &NamedTensors, c: &NetConfig, device: &Device) -> Result<Self, WeightError> {
         c.check()
             .map_err(|e| WeightError::Missing(format!("(bad config: {e})")))?;
-        let mut heads = NamedTensors::default();
-        for h in AUX_HORIZONS {
-            let name = format!("aux{h}");
-            heads.insert(
-                format!("{name}.w"),
-                &[c.d_model, 2 * MOTION_FEATURE_DIM],
-                vec![0.0; c.d_model * 2 * MOTION_FEATURE_DIM],
-            );
-            heads.insert(
-                format!("{name}.b"),
-                &[2 * MOTION_FEATURE_DIM],
-                vec![0.0; 2 * MOTION_FEATURE_DIM],
-            );
-        }
-        let aux = AUX_HORIZONS
-            .iter()
-            .map(|h| {
-                Dense::load(
-                    &heads,
-                    &format!("aux{h}"),
-                    c.d_model,
-                    2 * MOTION_FEATURE_DIM,
-                    device,
-                )
-            })
-            .collect::<Result<_, _>>()?;
         Ok(Net {
             transformer: Transformer::load(t, c, device)?,
             flow: Flow::load(t, "flow", &c.flow(), device)?,
-            aux,
         })
     }
 
@@ -288,15 +214,6 @@ impl Net {
                 .collect()
         };
         match path {
-            InputPath::Music => vec![self.transformer.embedding_rows(MUSIC_AT..KEY_AT)],
-            InputPath::RelativeLevel => {
-                let mut rows = vec![self.transformer.embedding_rows(LEVEL_AT..LEVEL_AT + 1)];
-                if c.level_to_flow {
-                    rows.extend(flow_rows(c.level_condition_at(), 1));
-                }
-                rows
-            }
-            InputPath::Style => self.transformer.style_rows().into_iter().collect(),
             InputPath::Key => {
                 let mut rows = vec![self.transformer.embedding_rows(KEY_AT..TOKEN_DIM)];
                 if c.key_to_flow {
@@ -308,49 +225,27 @@ impl Net {
     }
 
     /// Writes the trainable weights into `t` (normalisation and seed entries are left as they
-    /// are; the auxiliary heads are not written).
+    /// are).
     pub fn store(&self, t: &mut NamedTensors) {
         self.transformer.store(t);
         self.flow.store(t, "flow");
     }
 
-    /// Scores targets `[b, s, MOTION_FEATURE_DIM]` given tokens `[b, s, TOKEN_DIM]` and the
-    /// tokens' styles `[b·s, styles]`; `futures` (one `[b·s, MOTION_FEATURE_DIM]` per
-    /// [`AUX_HORIZONS`] entry) are scored by the auxiliary heads when given.
+    /// The flow's NLL of the next pose per row `[b·s]`, nats per frame: targets
+    /// `[b, s, MOTION_FEATURE_DIM]` given tokens `[b, s, TOKEN_DIM]` and the tokens' styles
+    /// `[b·s, styles]`.
     pub fn score(
         &self,
         tokens: Tensor<3>,
         styles: Option<Tensor<2>>,
         targets: Tensor<3>,
-        futures: Option<Vec<Tensor<2>>>,
-    ) -> Scores {
+    ) -> Tensor<1> {
         let [b, s, _] = targets.dims();
         let ctx = self.transformer.forward(tokens.clone(), styles);
-        let aux = match futures {
-            Some(f) => self
-                .aux
-                .iter()
-                .zip(f)
-                .map(|(head, y)| {
-                    let out = head.forward(ctx.clone());
-                    let mean = out.clone().narrow(1, 0, MOTION_FEATURE_DIM);
-                    let log_sigma = out
-                        .narrow(1, MOTION_FEATURE_DIM, MOTION_FEATURE_DIM)
-                        .clamp(AUX_LOG_SIGMA.0, AUX_LOG_SIGMA.1);
-                    let z = (y - mean) * log_sigma.clone().neg().exp();
-                    (z.powi_scalar(2).mul_scalar(0.5) + log_sigma)
-                        .sum_dim(1)
-                        .reshape([b * s])
-                })
-                .collect(),
-            None => Vec::new(),
-        };
         let ctx = self.flow_context(ctx, tokens);
-        let next = self
-            .flow
+        self.flow
             .log_prob(targets.reshape([b * s, MOTION_FEATURE_DIM]), ctx)
-            .neg();
-        Scores { next, aux }
+            .neg()
     }
 
     /// Free-runs the network from token `at` of each sequence to token `at + horizon`, as the
@@ -365,8 +260,7 @@ impl Net {
     /// back-propagation). A sequence whose pose explodes (beyond ±[`ROLLOUT_EXPLODED`]) goes on
     /// from the mean pose, without a gradient, and is marked not [`FreeRunOutcome::kept`];
     /// None if the flow has become numerically singular, a pose is not finite or every
-    /// sequence exploded. A fully detached run (`backprop_steps` Some(1), unbounded, no
-    /// styles) is replayed ([`Net::replayed_key_rollout`]): the same outcome for the cost of
+    /// sequence exploded. A fully detached run (`backprop_steps` Some(1), no styles) is replayed ([`Net::replayed_key_rollout`]): the same outcome for the cost of
     /// one forward pass instead of one a step, except that a sequence whose pose is not finite
     /// is left out instead of the whole run.
     pub fn key_rollout(
@@ -376,14 +270,14 @@ impl Net {
         run: &FreeRun,
         rng: &mut model::neural::rng::Rng,
     ) -> Option<FreeRunOutcome> {
-        if run.backprop_steps == Some(1) && !run.bounded && styles.is_none() {
+        if run.backprop_steps == Some(1) && styles.is_none() {
             return self.replayed_key_rollout(tokens, run, rng);
         }
         self.stepped_key_rollout(tokens, styles, run, rng)
     }
 
     /// [`Net::key_rollout`] step by step: every step re-encodes the sequence so far with its
-    /// gradient, so any `backprop_steps`, bound and styles can be honoured.
+    /// gradient, so any `backprop_steps` and styles can be honoured.
     pub fn stepped_key_rollout(
         &self,
         tokens: Tensor<3>,
@@ -398,7 +292,6 @@ impl Net {
             temperature,
             backprop_steps,
             approach,
-            bounded,
         } = *run;
         let last = (at + horizon).min(s - 1);
         let device = tokens.device();
@@ -438,9 +331,7 @@ impl Net {
                 burn::tensor::TensorData::new(noise, [b, MOTION_FEATURE_DIM]),
                 &device,
             );
-            let pose =
-                self.flow
-                    .inverse_within(z, ctx, bounded.then_some(ROLLOUT_INVERSE_BOUND))?;
+            let pose = self.flow.inverse(z, ctx)?;
             // A sequence that exploded (the flow's inverse amplifies by up to 1/σ per coupling)
             // goes on from a constant: clamped, it would be scored as if it had danced. A
             // non-finite pose drops the whole run: its zero gradient times an infinite one
@@ -586,10 +477,7 @@ impl Net {
             }
         }
         let z = Tensor::<2>::from_data(burn::tensor::TensorData::new(z, [b * steps, P]), &device);
-        let poses = self
-            .flow
-            .inverse_within(z, ctx, None)?
-            .reshape([b, steps * P]);
+        let poses = self.flow.inverse(z, ctx)?.reshape([b, steps * P]);
         let poses = leave_out_exploded(poses, &mut kept)?
             .clamp(-ROLLOUT_BOUND, ROLLOUT_BOUND)
             .reshape([b, steps, P]);
@@ -632,8 +520,7 @@ impl Net {
             let width = st.dims()[2];
             st.narrow(1, 0, w).reshape([b * w, width])
         });
-        self.score(keyless, rows, targets, None)
-            .next
+        self.score(keyless, rows, targets)
             .reshape([b, w])
             .narrow(1, at, steps)
     }
@@ -654,7 +541,6 @@ impl Net {
         Net {
             transformer: self.transformer,
             flow,
-            aux: self.aux,
         }
     }
 }
@@ -882,10 +768,7 @@ mod tests {
             );
             let tt = Tensor::<3>::from_data(TensorData::new(tokens, [1, s, TOKEN_DIM]), &device);
             let mut rng = Rng::new(1);
-            let runs = [None, Some(1), Some(3)]
-                .into_iter()
-                .flat_map(|b| [(b, false), (b, true)]);
-            for (backprop_steps, bounded) in runs {
+            for backprop_steps in [None, Some(1), Some(3)] {
                 for (approach, expected) in [(0, live), (8, approached)] {
                     let run = FreeRun {
                         at,
@@ -893,7 +776,6 @@ mod tests {
                         temperature: 0.0,
                         backprop_steps,
                         approach,
-                        bounded,
                     };
                     let outcome = net.key_rollout(tt.clone(), None, &run, &mut rng).unwrap();
                     let poses = values(outcome.poses);
@@ -970,7 +852,6 @@ mod tests {
                 temperature: 0.5,
                 backprop_steps: Some(1),
                 approach: 8,
-                bounded: false,
             };
             let stepped = net
                 .stepped_key_rollout(tt.clone(), None, &run, &mut Rng::new(3))
@@ -1052,7 +933,6 @@ mod tests {
             temperature: 0.5,
             backprop_steps: Some(1),
             approach: 4,
-            bounded: false,
         };
         assert!(
             net.stepped_key_rollout(tt.clone(), None, &run, &mut Rng::new(3))
@@ -1101,7 +981,6 @@ mod tests {
             temperature: 0.0,
             backprop_steps: Some(1),
             approach: 0,
-            bounded: false,
         };
         let outcome = net.key_rollout(tt, None, &run, &mut Rng::new(1)).unwrap();
         let scored = values(net.keyless_nll(&outcome, None, before.clone()).mean_dim(1));
@@ -1126,15 +1005,11 @@ mod tests {
         }
         let tensor3 =
             |v: Vec<f32>, w: usize| Tensor::<3>::from_data(TensorData::new(v, [2, s, w]), &device);
-        let rows = values(
-            net.score(
-                tensor3(keyless, TOKEN_DIM),
-                None,
-                tensor3(targets.clone(), MOTION_FEATURE_DIM),
-                None,
-            )
-            .next,
-        );
+        let rows = values(net.score(
+            tensor3(keyless, TOKEN_DIM),
+            None,
+            tensor3(targets.clone(), MOTION_FEATURE_DIM),
+        ));
         for q in 0..2 {
             let by_hand = rows[q * s + at..(q + 1) * s].iter().sum::<f32>() / (horizon + 1) as f32;
             assert!(
@@ -1144,15 +1019,11 @@ mod tests {
             );
         }
         // With the key visible the same poses score otherwise: the hiding is what is measured.
-        let seen = values(
-            net.score(
-                tensor3(fed, TOKEN_DIM),
-                None,
-                tensor3(targets, MOTION_FEATURE_DIM),
-                None,
-            )
-            .next,
-        );
+        let seen = values(net.score(
+            tensor3(fed, TOKEN_DIM),
+            None,
+            tensor3(targets, MOTION_FEATURE_DIM),
+        ));
         let seen0 = seen[at..s].iter().sum::<f32>() / (horizon + 1) as f32;
         assert!((seen0 - scored[0]).abs() > 1e-3, "{seen0} vs {}", scored[0]);
     }

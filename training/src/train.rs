@@ -9,26 +9,19 @@ use burn::tensor::{Device, Tensor, TensorData};
 use crate::body_shape::BodyShape;
 use crate::device::{cpu_device, training_device};
 use crate::layers::{WeightRows, values};
-use crate::net::{AUX_HORIZONS, FreeRun, FreeRunOutcome, InputPath, Net};
+use crate::net::{FreeRun, FreeRunOutcome, InputPath, Net};
 use dsp::feature::FEATURE_DIM as M;
 use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::file::NeuralModel;
 use model::neural::rng::Rng;
-use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
+use model::neural::tensors::{NamedTensors, WeightError};
 use model::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 
 /// Shortest key-pose horizon drawn in training, frames (0.5 s).
 pub const KEY_HORIZON_MIN: usize = 12;
 /// Longest key-pose horizon drawn in training, frames (4 s).
 pub const KEY_HORIZON_MAX: usize = 100;
-
-/// Longest glide of a spliced key pose into the dance, frames (2 s): the glide starts when the
-/// pose is announced or this long before it is due, whichever is later, so it depends only on
-/// what the network sees (the announcement, within its 64-frame window, or the frames to go).
-pub const KEY_SPLICE_GLIDE: usize = 50;
-/// Frames over which a spliced key pose's offset fades after the pose is reached (1 s).
-pub const KEY_SPLICE_RELEASE: usize = 25;
 
 /// The joint rotations of frame `f` of a normalised dance's flat `motion`: what a key pose
 /// fixes.
@@ -44,12 +37,6 @@ fn announce_on_last(batch: &mut Batch, sequence: usize, at: usize, horizon: usiz
     for tok in announced.skip(at).take(horizon + 1) {
         tok[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM].copy_from_slice(pose);
     }
-}
-
-/// 3x² − 2x³ of `x` clamped to [0, 1].
-fn smoothstep(x: f32) -> f32 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
 }
 
 /// Standard deviation of the Gaussian noise added to training targets (normalised units):
@@ -78,10 +65,6 @@ struct Dance {
 /// [`model::style::DanceStyle`]), if known.
 pub type DanceInput<'a> = (&'a [MotionFeatures], &'a [[f32; M]], Option<usize>);
 
-/// Weight of each auxiliary future-pose NLL in the training loss, against 1 for the next
-/// pose's.
-pub const AUX_WEIGHT: f32 = 0.3;
-
 /// Normalised dances to cut training sequences from.
 #[derive(Clone, Debug)]
 pub struct Corpus {
@@ -90,12 +73,6 @@ pub struct Corpus {
     sequence: usize,
     input_noise: f32,
     music_drop: f64,
-    style_drop: f64,
-    key_splice: f64,
-    pose_drop: f64,
-    /// Cumulative sampling weight of each dance when styles are balanced (empty: every frame
-    /// equally likely).
-    balanced: Vec<f64>,
 }
 
 /// Rebuilds `model` to read the key pose in its flow (`key_to_flow`) as well as through the
@@ -103,25 +80,6 @@ pub struct Corpus {
 /// training moves them (a key-pose loss then reaches the key by the shortest path).
 pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
     widen_flow_context(model, |c| c.key_to_flow = true)
-}
-
-/// Rebuilds `model` to read the relative level in its flow (`level_to_flow`), the new input
-/// weighted zero: it dances exactly as before until training moves it.
-pub fn add_level_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
-    widen_flow_context(model, |c| c.level_to_flow = true)
-}
-
-/// Gives a model without a style input one (`DanceStyle::COUNT` styles, every row zero): it
-/// dances exactly as before, with or without a style, until training moves the rows.
-pub fn add_style_input(model: &mut NeuralModel) {
-    if model.config.styles > 0 {
-        return;
-    }
-    let (styles, d) = (model::style::DanceStyle::COUNT, model.config.d_model);
-    model
-        .tensors
-        .insert(STYLE_EMBEDDING, &[styles, d], vec![0.0; styles * d]);
-    model.config.styles = styles;
 }
 
 /// Gives `model` the flow inputs `change` adds to its config, as zero rows of each coupling's
@@ -138,12 +96,8 @@ fn widen_flow_context(
         model.config = after;
         return Ok(());
     }
-    // The one block of the context that differs: where the two layouts first part.
-    let at = if after.key_to_flow != before.key_to_flow {
-        after.key_condition_at()
-    } else {
-        after.level_condition_at()
-    };
+    // Where the key's block enters the flow's context.
+    let at = after.key_condition_at();
     let added = new.context - old.context;
     let inputs = old.half() + old.context;
     for k in 0..old.steps {
@@ -174,9 +128,6 @@ pub struct Batch {
     pub targets: Vec<f32>,
     /// Each token's style, one-hot (zeros: unknown) `[b, window, styles]`, flat.
     pub styles: Vec<f32>,
-    /// The poses [`AUX_HORIZONS`] frames after each target (normalised, clean; the dance's
-    /// last frame where it ends sooner), one flat `[b, window, P]` per horizon.
-    pub futures: Vec<Vec<f32>>,
 }
 
 impl Corpus {
@@ -217,88 +168,7 @@ impl Corpus {
             sequence,
             input_noise: INPUT_NOISE,
             music_drop: 0.0,
-            style_drop: 0.0,
-            key_splice: 0.0,
-            pose_drop: 0.0,
-            balanced: Vec::new(),
         }
-    }
-
-    /// Sets the fraction of key-pose sequences whose key pose is spliced in: a pose from
-    /// anywhere in the corpus replaces the dance's own, and the dance glides onto it (joint
-    /// rotations offset by a smoothstep from the announcement, or [`KEY_SPLICE_GLIDE`] frames
-    /// before it is due, to the key frame, and released over [`KEY_SPLICE_RELEASE`] frames).
-    /// The data's own future pose is what the past already predicts, so a network trained on
-    /// it alone has no reason to read the key input; a spliced one can be reached only by
-    /// reading it.
-    pub fn set_key_splice(&mut self, p: f64) {
-        self.key_splice = p.clamp(0.0, 1.0);
-    }
-
-    /// Sets the fraction of training tokens whose previous pose is hidden (all zeros, the
-    /// normalised mean; MoGlow's data dropout, 0.7 in Yang et al.'s key-pose flow): with the
-    /// past always there it predicts the next pose to the noise floor and a key pose adds
-    /// nothing to the likelihood; with most of it hidden the key and the music must carry it.
-    pub fn set_pose_drop(&mut self, p: f64) {
-        self.pose_drop = p.clamp(0.0, 1.0);
-    }
-
-    /// Sets the fraction of training sequences whose style input is hidden (all zeros), so
-    /// the network also learns to dance without one and a style acts as a shift from there.
-    pub fn set_style_drop(&mut self, p: f64) {
-        self.style_drop = p.clamp(0.0, 1.0);
-    }
-
-    /// Re-weights sampling between styles: each style's share of sequences goes as its frames
-    /// to the power `1 − balance` (0: every frame equally likely, so 25 waltzes drown 4
-    /// cha-chas; 1: every style equally often; dances without a style form one group).
-    /// Within a style, a dance is drawn in proportion to its length.
-    pub fn set_style_balance(&mut self, balance: f64) {
-        let balance = balance.clamp(0.0, 1.0);
-        if balance == 0.0 {
-            self.balanced.clear();
-            return;
-        }
-        let mut style_frames = std::collections::HashMap::new();
-        for d in &self.dances {
-            *style_frames.entry(d.style).or_insert(0usize) += d.frames;
-        }
-        let mut sum = 0.0;
-        self.balanced = self
-            .dances
-            .iter()
-            .map(|d| {
-                let group = style_frames[&d.style] as f64;
-                sum += d.frames as f64 * group.powf(-balance);
-                sum
-            })
-            .collect();
-    }
-
-    /// Fraction of sequences each style gets (by style index; None: dances without a style).
-    pub fn style_shares(&self) -> Vec<(Option<usize>, f64)> {
-        let mut shares: Vec<(Option<usize>, f64)> = Vec::new();
-        let mut previous = 0.0;
-        for (i, d) in self.dances.iter().enumerate() {
-            let w = match self.balanced.get(i) {
-                Some(&c) => {
-                    let w = c - previous;
-                    previous = c;
-                    w
-                }
-                None => d.frames as f64,
-            };
-            match shares.iter_mut().find(|(s, _)| *s == d.style) {
-                Some(entry) => entry.1 += w,
-                None => shares.push((d.style, w)),
-            }
-        }
-        let total: f64 = shares.iter().map(|s| s.1).sum();
-        for s in &mut shares {
-            s.1 /= total.max(f64::MIN_POSITIVE);
-        }
-        shares.sort_by_key(|s| s.0);
-        shares
     }
 
     /// Sets the noise on the previous pose of training tokens (normalised units).
@@ -324,99 +194,43 @@ impl Corpus {
     }
 
     /// Appends the sequence of `dance` starting at frame `start`; `key` is (token at which the
-    /// key pose is set, its frame), if any; `donor` the (dance, frame) whose pose is spliced in
-    /// as the key pose (see [`Corpus::set_key_splice`]).
+    /// key pose is set, its frame), if any; `noise` draws the input and target noise and the
+    /// music drop (None: a clean sequence).
     fn push_sequence(
         &self,
         batch: &mut Batch,
         dance: usize,
         start: usize,
         key: Option<(usize, usize)>,
-        donor: Option<(usize, usize)>,
         mut noise: Option<&mut Rng>,
     ) {
         let no_music = match noise.as_mut() {
             Some(rng) => rng.uniform() < self.music_drop,
             None => false,
         };
-        // Drawn only when asked for, so runs without style drop keep their random stream.
-        let no_style = match noise.as_mut() {
-            Some(rng) if self.style_drop > 0.0 => rng.uniform() < self.style_drop,
-            _ => false,
-        };
         let d = &self.dances[dance];
-        let style = if no_style { None } else { d.style };
         let (s, l) = (self.sequence, self.config.lookahead);
         let mut tok = vec![0.0; TOKEN_DIM];
         let width = style_width(&self.config);
-        batch.futures.resize(AUX_HORIZONS.len(), Vec::new());
-        // A spliced key pose: its rotations, their offset from the dance's own at the key
-        // frame, and the glide's start.
-        let splice = key.zip(donor).map(|((at, kf), (dd, df))| {
-            let own = rotations(&d.motion, kf);
-            let pose = rotations(&self.dances[dd].motion, df);
-            let offset: Vec<f32> = pose.iter().zip(own).map(|(a, b)| a - b).collect();
-            let glide_from = (start + at).max(kf.saturating_sub(KEY_SPLICE_GLIDE));
-            (pose, offset, glide_from, kf)
-        });
-        let weight = |f: usize| -> f32 {
-            match &splice {
-                Some((_, _, from, kf)) if f <= *kf => {
-                    smoothstep((f as f32 - *from as f32 + 1.0) / (*kf - *from + 1) as f32)
-                }
-                Some((_, _, _, kf)) => {
-                    1.0 - smoothstep((f - kf) as f32 / KEY_SPLICE_RELEASE as f32)
-                }
-                None => 0.0,
-            }
-        };
-        // Frame `f` of the dance, the spliced pose glided in.
-        let spliced = |f: usize| -> Vec<f32> {
-            let mut frame = d.motion[f * P..(f + 1) * P].to_vec();
-            if let Some((_, offset, _, _)) = &splice {
-                let w = weight(f);
-                if w > 0.0 {
-                    for (v, o) in frame[ROTATIONS..ROTATIONS + KEY_ROT_DIM]
-                        .iter_mut()
-                        .zip(offset)
-                    {
-                        *v += w * o;
-                    }
-                }
-            }
-            frame
-        };
+        let frame = |f: usize| &d.motion[f * P..(f + 1) * P];
         for t in 0..s {
             let f = start + t;
-            let pose = &spliced(f - 1)[..];
             let music = if no_music {
                 &ZERO_MUSIC[..]
             } else {
                 &d.music[(f + l) * M..(f + l + 1) * M]
             };
             let k = key.and_then(|(at, kf)| {
-                (t >= at && f <= kf).then(|| {
-                    (
-                        match &splice {
-                            Some((pose, ..)) => *pose,
-                            None => rotations(&d.motion, kf),
-                        },
-                        (kf - f) as u32,
-                    )
-                })
+                (t >= at && f <= kf).then(|| (rotations(&d.motion, kf), (kf - f) as u32))
             });
-            token::fill(&mut tok, pose, music, k);
+            token::fill(&mut tok, frame(f - 1), music, k);
             if let Some(rng) = noise.as_mut() {
                 for v in &mut tok[token::POSE_AT..token::POSE_AT + P] {
                     *v += self.input_noise * rng.normal();
                 }
-                // Drawn only when asked for, so runs without it keep their random stream.
-                if self.pose_drop > 0.0 && rng.uniform() < self.pose_drop {
-                    tok[token::POSE_AT..token::POSE_AT + P].fill(0.0);
-                }
             }
             batch.tokens.extend_from_slice(&tok);
-            batch.targets.extend_from_slice(&spliced(f));
+            batch.targets.extend_from_slice(frame(f));
             if let Some(rng) = noise.as_mut() {
                 let n = batch.targets.len();
                 for v in &mut batch.targets[n - P..] {
@@ -425,12 +239,8 @@ impl Corpus {
             }
             let n = batch.styles.len();
             batch.styles.resize(n + width, 0.0);
-            if let Some(style) = style {
+            if let Some(style) = d.style {
                 batch.styles[n + style] = 1.0;
-            }
-            for (h, future) in AUX_HORIZONS.iter().zip(batch.futures.iter_mut()) {
-                let g = (f + h).min(d.frames - 1);
-                future.extend_from_slice(&spliced(g));
             }
         }
         batch.sequences += 1;
@@ -460,30 +270,14 @@ impl Corpus {
                 let horizon = KEY_HORIZON_MIN + rng.below(KEY_HORIZON_MAX - KEY_HORIZON_MIN + 1);
                 (at, (start + at + horizon).min(n - 1))
             });
-            // Drawn only when asked for, so runs without splicing keep their random stream.
-            let donor = match key {
-                Some(_) if self.key_splice > 0.0 && rng.uniform() < self.key_splice => {
-                    Some(self.any_frame(rng))
-                }
-                _ => None,
-            };
-            self.push_sequence(&mut batch, dance, start, key, donor, Some(rng));
+            self.push_sequence(&mut batch, dance, start, key, Some(rng));
         }
         batch
     }
 
-    /// A dance drawn in proportion to its length, so every frame is equally likely, or by the
-    /// style-balanced weights when they are set.
+    /// A dance drawn in proportion to its length, so every frame is equally likely.
     fn pick_dance(&self, rng: &mut Rng) -> usize {
-        match self.balanced.last() {
-            Some(&sum) => {
-                let pick = rng.uniform() * sum;
-                self.balanced
-                    .partition_point(|&c| c <= pick)
-                    .min(self.dances.len() - 1)
-            }
-            None => self.any_frame(rng).0,
-        }
+        self.any_frame(rng).0
     }
 
     /// A (dance, frame) drawn uniformly from all the corpus' frames.
@@ -523,17 +317,9 @@ impl Corpus {
     /// most extreme normalised pose value is smallest. A seed at the edge of the data (an arm
     /// raised 3σ) sends the free-running model off the data's range in a few frames.
     pub fn typical_seed(&self) -> Option<(usize, usize)> {
-        self.typical_seed_of(None)
-    }
-
-    /// [`Self::typical_seed`] among the dances of style `style` (None: every dance).
-    pub fn typical_seed_of(&self, style: Option<usize>) -> Option<(usize, usize)> {
         let (n, l) = (self.config.window, self.config.lookahead);
         let mut best: Option<(f32, usize, usize)> = None;
         for (i, d) in self.dances.iter().enumerate() {
-            if style.is_some() && d.style != style {
-                continue;
-            }
             let frame_max: Vec<f32> = d
                 .motion
                 .chunks_exact(P)
@@ -557,10 +343,7 @@ impl Corpus {
     /// drawn as [`Corpus::random_batch`] draws them): each announces a key pose due `horizon`
     /// frames after token `at`, on tokens `at` to `at + horizon` (< the sequence length) — its
     /// own pose of that frame, or for a fraction `foreign` of them a pose from anywhere in the
-    /// training dances, as a performer calls a pose the dance was not heading for: of
-    /// `foreign_draws` frames drawn, the one farthest (normalised rotations) from the dance's
-    /// own pose there, since a performer calls poses that stand out (the shipped bank is the
-    /// poses farthest apart) and a frame drawn at random is most often near the mean pose.
+    /// training dances, as a performer calls a pose the dance was not heading for.
     pub fn rollout_batch(
         &self,
         rng: &mut Rng,
@@ -568,7 +351,6 @@ impl Corpus {
         at: usize,
         horizon: usize,
         foreign: f64,
-        foreign_draws: usize,
     ) -> Batch {
         let mut batch = Batch::default();
         let s = self.sequence;
@@ -576,26 +358,10 @@ impl Corpus {
         for _ in 0..sequences {
             let (dance, start) = self.rollout_start(rng);
             let key = Some((at, start + at + horizon));
-            self.push_sequence(&mut batch, dance, start, key, None, None);
+            self.push_sequence(&mut batch, dance, start, key, None);
             // Drawn only when asked for, so runs without foreign keys keep their random stream.
             if foreign > 0.0 && rng.uniform() < foreign {
-                let own = rotations(&self.dances[dance].motion, start + at + horizon);
-                let apart = |(d, f): (usize, usize)| -> f32 {
-                    rotations(&self.dances[d].motion, f)
-                        .iter()
-                        .zip(own)
-                        .map(|(a, b)| (a - b) * (a - b))
-                        .sum()
-                };
-                let first = self.any_frame(rng);
-                let (mut pick, mut farthest) = (first, apart(first));
-                for _ in 1..foreign_draws {
-                    let other = self.any_frame(rng);
-                    let d = apart(other);
-                    if d > farthest {
-                        (pick, farthest) = (other, d);
-                    }
-                }
+                let pick = self.any_frame(rng);
                 let pose = rotations(&self.dances[pick.0].motion, pick.1);
                 announce_on_last(&mut batch, s, at, horizon, pose);
             }
@@ -610,7 +376,7 @@ impl Corpus {
         let mut batch = Batch::default();
         for _ in 0..sequences {
             let (dance, start) = self.rollout_start(rng);
-            self.push_sequence(&mut batch, dance, start, None, None, None);
+            self.push_sequence(&mut batch, dance, start, None, None);
         }
         batch
     }
@@ -623,30 +389,10 @@ impl Corpus {
         (dance, 1 + rng.below(n - s - l))
     }
 
-    /// Every non-overlapping sequence with a key pose announced on its middle token (half a
-    /// sequence of past before it) and due `horizon` frames later (at most to the last
-    /// token), announcing `key`: teacher-forced, how much a key lowers the NLL of the frames
-    /// before it (`danced-train key-probe`).
-    pub fn key_probe(&self, horizon: usize, key: ProbeKey) -> Vec<Batch> {
-        let s = self.sequence;
-        let at = s / 2;
-        let horizon = horizon.min(s - 1 - at);
-        self.sequences_in_order(|batch, i, start| {
-            let kf = start + at + horizon;
-            let announced = (key != ProbeKey::Absent).then_some((at, kf));
-            self.push_sequence(batch, i, start, announced, None, None);
-            if key == ProbeKey::Foreign {
-                let other = &self.dances[(i + 1) % self.dances.len()];
-                let pose = rotations(&other.motion, kf.min(other.frames - 1));
-                announce_on_last(batch, s, at, horizon, pose);
-            }
-        })
-    }
-
     /// Every non-overlapping sequence, without key poses, in order (the validation set).
     pub fn all_sequences(&self) -> Vec<Batch> {
         self.sequences_in_order(|batch, dance, start| {
-            self.push_sequence(batch, dance, start, None, None, None)
+            self.push_sequence(batch, dance, start, None, None)
         })
     }
 
@@ -673,24 +419,11 @@ impl Corpus {
     }
 }
 
-/// The key pose a [`Corpus::key_probe`] sequence announces.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ProbeKey {
-    /// The dance's own pose on the key frame: its future, as training announces it.
-    Own,
-    /// No key pose.
-    Absent,
-    /// The next dance's pose on that frame: a key the teacher-forced frames do not reach.
-    Foreign,
-}
-
-/// A batch as tensors: tokens, styles (None for a network without a style input), targets and
-/// the auxiliary futures.
+/// A batch as tensors: tokens, styles (None for a network without a style input) and targets.
 struct BatchTensors {
     tokens: Tensor<3>,
     styles: Option<Tensor<2>>,
     targets: Tensor<3>,
-    futures: Vec<Tensor<2>>,
 }
 
 fn tensors(b: &Batch, device: &Device) -> BatchTensors {
@@ -708,11 +441,6 @@ fn tensors(b: &Batch, device: &Device) -> BatchTensors {
             TensorData::new(b.targets.clone(), [b.sequences, s, P]),
             device,
         ),
-        futures: b
-            .futures
-            .iter()
-            .map(|f| Tensor::from_data(TensorData::new(f.clone(), [rows, P]), device))
-            .collect(),
     }
 }
 
@@ -780,30 +508,13 @@ pub struct CriticTerm {
     /// data's own) cost nothing: the critic objects to what does not look like dancing and
     /// does not reward the free run for being likelier than dancing.
     pub floor: f32,
-    /// Whether the critic's weight fades over the approach (`approach` frames of the
-    /// rollout), to 0 on the key frame: the key distance alone judges the last step onto it.
-    pub fade: bool,
 }
 
 impl CriticTerm {
     /// The weighted loss of the critic's per-frame NLL `[b, steps]` (the last step the key
-    /// frame) of `run`, whose approach is `approach` frames (its exploded sequences not counted).
-    fn loss(
-        &self,
-        frames: Tensor<2>,
-        run: &FreeRunOutcome,
-        approach: usize,
-        device: &Device,
-    ) -> Tensor<1> {
-        let mut nll = frames.clamp_min(self.floor);
-        if self.fade {
-            let [_, steps] = nll.dims();
-            let n = approach.max(1) as f32;
-            let fade: Vec<f32> = (0..steps)
-                .map(|j| ((steps - 1 - j) as f32 / n).min(1.0))
-                .collect();
-            nll = nll * Tensor::<2>::from_data(TensorData::new(fade, [1, steps]), device);
-        }
+    /// frame) of `run` (its exploded sequences not counted).
+    fn loss(&self, frames: Tensor<2>, run: &FreeRunOutcome) -> Tensor<1> {
+        let nll = frames.clamp_min(self.floor);
         run.kept_mean(nll).mul_scalar(self.weight)
     }
 }
@@ -952,16 +663,9 @@ impl Trainer {
             .map(|n| n.data_init(t.tokens, t.styles, t.targets));
     }
 
-    /// One optimiser step at learning rate `lr` on the next pose's NLL plus [`AUX_WEIGHT`]
-    /// times each future pose's (with `aux`), plus the `rollout`'s key-pose loss (see
-    /// [`KeyRollout`]); a non-finite loss skips the update.
-    pub fn step(
-        &mut self,
-        batch: &Batch,
-        rollout: Option<&KeyRollout>,
-        lr: f64,
-        aux: bool,
-    ) -> StepLoss {
+    /// One optimiser step at learning rate `lr` on the next pose's NLL plus the `rollout`'s
+    /// key-pose loss (see [`KeyRollout`]); a non-finite loss skips the update.
+    pub fn step(&mut self, batch: &Batch, rollout: Option<&KeyRollout>, lr: f64) -> StepLoss {
         let mut scored = StepLoss {
             nll: f32::NAN,
             key_error: None,
@@ -975,13 +679,8 @@ impl Trainer {
             return scored;
         };
         let t = tensors(batch, &self.device);
-        let scores = net.score(t.tokens, t.styles, t.targets, aux.then_some(t.futures));
-        let next = scores.next.mean();
-        let value = values(next.clone()).first().copied().unwrap_or(f32::NAN);
-        let mut loss = scores
-            .aux
-            .into_iter()
-            .fold(next, |l, a| l + a.mean().mul_scalar(AUX_WEIGHT));
+        let mut loss = net.score(t.tokens, t.styles, t.targets).mean();
+        let value = values(loss.clone()).first().copied().unwrap_or(f32::NAN);
         if let Some(r) = rollout {
             let rt = tensors(&r.batch, &self.device);
             let [b, s, _] = rt.tokens.dims();
@@ -1032,7 +731,7 @@ impl Trainer {
                             .copied()
                             .filter(|v| v.is_finite());
                         if scored.keyless_nll.is_some() {
-                            loss = loss + term.loss(frames, &outcome, r.run.approach, &self.device);
+                            loss = loss + term.loss(frames, &outcome);
                         }
                     }
                 }
@@ -1112,7 +811,7 @@ impl Trainer {
         let mut out = Vec::new();
         for b in batches {
             let t = tensors(b, &device);
-            out.extend(values(net.score(t.tokens, t.styles, t.targets, None).next));
+            out.extend(values(net.score(t.tokens, t.styles, t.targets)));
         }
         Ok(out)
     }
@@ -1172,7 +871,7 @@ mod tests {
         (c, corpus, tr, rng)
     }
 
-    /// A rebuild of a network's flow inputs ([`add_key_to_flow`], [`add_level_to_flow`]).
+    /// A rebuild of a network's flow inputs ([`add_key_to_flow`]).
     type Widen = fn(&mut NeuralModel) -> Result<(), WeightError>;
 
     /// Feeds `before` and `after` the same 12 random tokens (a key pending from token
@@ -1223,33 +922,13 @@ mod tests {
     }
 
     #[test]
-    fn a_network_given_the_relative_level_in_its_flow_dances_as_before_until_trained() {
-        // As the shipped model is widened: its flow already reads the key.
-        let c = NetConfig {
-            styles: 0,
-            key_to_flow: true,
-            ..NetConfig::tiny()
-        };
-        assert!(dances_as_before_widened(c, add_level_to_flow).level_to_flow);
-        // The key inserted before a level the flow already reads: the level's trained
-        // weights stay on the level's input (appended after it, they would read a key input).
-        let c = NetConfig {
-            styles: 0,
-            level_to_flow: true,
-            ..NetConfig::tiny()
-        };
-        let widened = dances_as_before_widened(c, add_key_to_flow);
-        assert!(widened.key_to_flow && widened.level_to_flow);
-    }
-
-    #[test]
     fn a_few_steps_lower_the_nll_of_a_simple_dance() {
         let (_, corpus, mut tr, mut rng) = periodic_trainer(Some(1));
         let val = corpus.all_sequences();
         let before = tr.evaluate(&val).unwrap();
         for _ in 0..30 {
             let b = corpus.random_batch(&mut rng, 8, 0.5);
-            assert!(tr.step(&b, None, 3e-3, true).nll.is_finite());
+            assert!(tr.step(&b, None, 3e-3).nll.is_finite());
         }
         let after = tr.evaluate(&val).unwrap();
         assert!(after < before - 20.0, "NLL {before} → {after}");
@@ -1274,7 +953,7 @@ mod tests {
             .collect();
         // Per sequence: is the announced key its own pose at the key frame?
         let own_keys = |foreign: f64| -> Vec<bool> {
-            let b = corpus.rollout_batch(&mut Rng::new(5), 400, at, horizon, foreign, 1);
+            let b = corpus.rollout_batch(&mut Rng::new(5), 400, at, horizon, foreign);
             (0..b.sequences)
                 .map(|i| {
                     let tok = |t: usize| &b.tokens[(i * s + t) * TOKEN_DIM..][..TOKEN_DIM];
@@ -1294,27 +973,6 @@ mod tests {
         assert!((half - 0.5).abs() < 0.08, "own keys at 0.5: {half}");
         let all = share(own_keys(1.0));
         assert!(all < 0.05, "own keys at 1: {all}");
-        // The farthest of several draws stands further from the dance's own pose.
-        let apart = |draws: usize| -> f32 {
-            let b = corpus.rollout_batch(&mut Rng::new(5), 400, at, horizon, 1.0, draws);
-            (0..b.sequences)
-                .map(|i| {
-                    let key = &b.tokens[(i * s + at) * TOKEN_DIM + token::KEY_AT..][..KEY_ROT_DIM];
-                    let own = rotations(&b.targets[(i * s + at + horizon) * P..][..P], 0);
-                    key.iter()
-                        .zip(own)
-                        .map(|(a, b)| (a - b).powi(2))
-                        .sum::<f32>()
-                        .sqrt()
-                })
-                .sum::<f32>()
-                / b.sequences as f32
-        };
-        let (one, eight) = (apart(1), apart(8));
-        assert!(
-            eight > 1.3 * one,
-            "mean distance {one} with one draw, {eight} with eight"
-        );
     }
 
     /// The same four sequences' free runs from token `at` to a key 6 frames on, at
@@ -1328,14 +986,13 @@ mod tests {
         kinetic: f32,
     ) -> KeyRollout {
         KeyRollout {
-            batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0, 1),
+            batch: corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 0.0),
             run: FreeRun {
                 at,
                 horizon: 6,
                 temperature,
                 backprop_steps: None,
                 approach: 0,
-                bounded: false,
             },
             weight,
             critic: None,
@@ -1357,7 +1014,7 @@ mod tests {
                 ..lesson_rollout(&corpus, at, 0.0, 1.0, 0.0)
             };
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
-            let scored = tr.step(&b, Some(&r), lr, false);
+            let scored = tr.step(&b, Some(&r), lr);
             assert!(scored.nll.is_finite());
             (scored.key_error.unwrap(), scored.key_error_cm.unwrap())
         };
@@ -1376,7 +1033,7 @@ mod tests {
             // The same sequences and noise every time; the key itself weighs nothing.
             let r = lesson_rollout(&corpus, at, 0.5, 0.0, kinetic);
             let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
-            tr.step(&b, Some(&r), lr, false).kinetic_mismatch
+            tr.step(&b, Some(&r), lr).kinetic_mismatch
         };
         // Without the term nothing is measured.
         assert_eq!(rollout(0.0, 0.0), None);
@@ -1395,7 +1052,7 @@ mod tests {
     fn trained_periodic_trainer(steps: usize) -> (NetConfig, Corpus, Trainer, Rng) {
         let (c, corpus, mut tr, mut rng) = periodic_trainer(None);
         for _ in 0..steps {
-            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
+            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3);
         }
         (c, corpus, tr, rng)
     }
@@ -1433,14 +1090,13 @@ mod tests {
             .unwrap()
             .training_only(InputPath::Key);
         let at = c.window - 1;
-        let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 1.0, 1);
+        let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 6, 1.0);
         let run = FreeRun {
             at,
             horizon: 6,
             temperature: 0.0,
             backprop_steps: None,
             approach: 0,
-            bounded: false,
         };
         let mut lesson = |lr: f64| {
             rollout_step(&corpus, &mut tr, &batch, run, 1.0, None, lr)
@@ -1516,128 +1172,11 @@ mod tests {
         moved
     }
 
-    /// Trains a periodic dance's network for 30 steps on `path` alone (widened first by
-    /// `widen`): the validation NLL before and after, and the rows that moved by tensor name.
-    /// For the relative level the dance's music also swells and fades with its motion (the
-    /// periodic dance's is steady, so nothing could learn from it).
-    fn trained_only_on(
-        path: InputPath,
-        widen: Option<Widen>,
-    ) -> (f64, f64, Vec<(String, Vec<usize>)>) {
-        let (c, mut corpus, mut tr, mut rng) = trained_periodic_trainer(60);
-        if path == InputPath::RelativeLevel {
-            let (motion, mut music) = periodic_dance();
-            for (i, m) in music.iter_mut().enumerate() {
-                m[dsp::feature::FeatureLayout::RELATIVE_LEVEL] =
-                    6.0 * ((i as f32 * 0.3).sin() - 1.0);
-            }
-            let norm = Normalizer::fit(&motion, &music);
-            corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 2 * c.window);
-        }
-        let mut start = tr.model().clone();
-        if let Some(widen) = widen {
-            widen(&mut start).unwrap();
-        }
-        let mut tr = Trainer::new(start.clone()).unwrap().training_only(path);
-        let val = corpus.all_sequences();
-        let before = tr.evaluate(&val).unwrap();
-        for _ in 0..30 {
-            tr.step(&corpus.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
-        }
-        let after = tr.evaluate(&val).unwrap();
-        (
-            before,
-            after,
-            moved_rows(&start.tensors, &tr.model().tensors),
-        )
-    }
-
-    #[test]
-    fn trained_on_the_music_path_only_only_the_music_rows_move() {
-        let (before, after, moved) = trained_only_on(InputPath::Music, None);
-        // The past already predicts the periodic dance, so the music's rows lower its NLL
-        // only a little (20.473 → 20.471 measured), but they do.
-        assert!(after < before, "NLL {before} → {after}");
-        assert_eq!(moved.len(), 1, "{moved:?}");
-        assert_eq!(moved[0].0, "embed.w");
-        assert!(
-            moved[0]
-                .1
-                .iter()
-                .all(|r| (token::MUSIC_AT..token::KEY_AT).contains(r)),
-            "{moved:?}"
-        );
-        assert!(moved[0].1.len() > 1, "{moved:?}");
-    }
-
-    #[test]
-    fn trained_on_the_relative_level_only_its_rows_move() {
-        let (before, after, moved) = trained_only_on(InputPath::RelativeLevel, None);
-        assert!(after <= before, "NLL {before} → {after}");
-        assert_eq!(moved, vec![("embed.w".to_string(), vec![token::LEVEL_AT])]);
-        // With the level in the flow, each coupling's row for it learns too (the context
-        // follows half the pose; the level follows the transformer's context).
-        let (_, _, moved) = trained_only_on(InputPath::RelativeLevel, Some(add_level_to_flow));
-        let c = NetConfig::tiny();
-        let row = c.flow().half() + c.level_condition_at();
-        let mut want = vec![("embed.w".to_string(), vec![token::LEVEL_AT])];
-        want.extend((0..c.flow_steps).map(|k| (format!("flow.{k}.c1.w"), vec![row])));
-        want.sort();
-        let mut moved = moved;
-        moved.sort();
-        assert_eq!(moved, want);
-    }
-
-    #[test]
-    fn a_style_input_given_to_a_network_without_one_learns_alone() {
-        let c = NetConfig {
-            styles: 0,
-            ..NetConfig::tiny()
-        };
-        let (_, plain, mut tr, mut rng) = periodic_trainer_of(c, None);
-        for _ in 0..30 {
-            tr.step(&plain.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
-        }
-        let mut start = tr.model().clone();
-        let mut before = Runtime::new(&start.tensors, &start.config).unwrap();
-        add_style_input(&mut start);
-        assert_eq!(start.config.styles, model::style::DanceStyle::COUNT);
-        // Unconditioned or not, it dances as before until trained.
-        let mut after = Runtime::new(&start.tensors, &start.config).unwrap();
-        after.set_style(Some(1));
-        assert_sample_alike(&mut before, &mut after, 5);
-        // Trained on a dance of style 1, only that style's row moves.
-        let c = start.config;
-        let (motion, music) = periodic_dance();
-        let norm = Normalizer::fit(&motion, &music);
-        let styled = Corpus::new(
-            &[(&motion[..], &music[..], Some(1))],
-            &norm,
-            &c,
-            2 * c.window,
-        );
-        let mut tr = Trainer::new(start.clone())
-            .unwrap()
-            .training_only(InputPath::Style);
-        let val = styled.all_sequences();
-        let nll_before = tr.evaluate(&val).unwrap();
-        for _ in 0..30 {
-            tr.step(&styled.random_batch(&mut rng, 8, 0.5), None, 3e-3, false);
-        }
-        let nll_after = tr.evaluate(&val).unwrap();
-        assert!(nll_after < nll_before, "NLL {nll_before} → {nll_after}");
-        assert_eq!(
-            moved_rows(&start.tensors, &tr.model().tensors),
-            vec![(STYLE_EMBEDDING.to_string(), vec![1])]
-        );
-    }
-
-    /// The critic's full term: every frame, no floor, no fade (to measure with at learning
+    /// The critic's full term: every frame, no floor (to measure with at learning
     /// rate 0, where it teaches nothing).
     const FULL_CRITIC: CriticTerm = CriticTerm {
         weight: 1.0,
         floor: f32::MIN,
-        fade: false,
     };
 
     /// One step on a small teacher-forced batch plus a rollout of `batch` (the same noise every
@@ -1661,7 +1200,7 @@ mod tests {
             kinetic: 0.0,
         };
         let b = corpus.random_batch(&mut Rng::new(8), 2, 0.5);
-        tr.step(&b, Some(&r), lr, false)
+        tr.step(&b, Some(&r), lr)
     }
 
     /// A copy of `start` with its frozen critic, taught 60 steps of `lesson(critic, lr, ..)`:
@@ -1704,14 +1243,13 @@ mod tests {
         let at = c.window - 1;
         // Foreign keys, free-run at T = 0 from the same sequences every time: the run is pulled
         // off the dance, and only the critic's term can pull it back.
-        let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0, 1);
+        let batch = corpus.rollout_batch(&mut Rng::new(7), 4, at, 8, 1.0);
         let run = FreeRun {
             at,
             horizon: 8,
             temperature: 0.0,
             backprop_steps: Some(1),
             approach: 4,
-            bounded: false,
         };
         let lesson = |critic: Option<CriticTerm>, lr: f64, tr: &mut Trainer| {
             let scored = rollout_step(&corpus, tr, &batch, run, 1.0, critic, lr);
@@ -1732,12 +1270,6 @@ mod tests {
         // the critic teaches nothing.
         let (_, floored) = trained(Some(CriticTerm { floor: 1e6, ..full }));
         assert_eq!(floored, key_alone, "a critic below its floor still taught");
-        // Faded to nothing on the key frame, the critic still holds the way there.
-        let (_, faded) = trained(Some(CriticTerm { fade: true, ..full }));
-        assert!(
-            faded < key_alone - 0.5 && faded != with_critic,
-            "faded {faded}, full {with_critic}, without {key_alone}"
-        );
     }
 
     #[test]
@@ -1758,7 +1290,6 @@ mod tests {
             temperature: 0.5,
             backprop_steps: Some(1),
             approach: 0,
-            bounded: false,
         };
         let lesson = |critic: Option<CriticTerm>, lr: f64, tr: &mut Trainer| {
             rollout_step(&corpus, tr, &batch, run, 0.0, critic, lr)
@@ -1772,123 +1303,6 @@ mod tests {
             with_critic < without - 0.5,
             "the free run's NLL under the critic: {before} at the start, {with_critic} trained with the critic, {without} without"
         );
-    }
-
-    #[test]
-    fn a_spliced_key_pose_is_reached_on_its_frame_and_announced_as_the_key() {
-        let c = NetConfig::tiny();
-        let frames = 200;
-        let dance = |phase: f32| -> Vec<[f32; P]> {
-            (0..frames)
-                .map(|i| {
-                    let mut m = [0.0f32; P];
-                    for (j, v) in m.iter_mut().enumerate() {
-                        *v = (phase + i as f32 * 0.05 + j as f32 * 0.3).sin();
-                    }
-                    m
-                })
-                .collect()
-        };
-        let (a, b) = (dance(0.0), dance(2.0));
-        let music = vec![[0.0f32; M]; frames];
-        let norm = Normalizer::fit(&a, &music);
-        let corpus = Corpus::new(
-            &[(&a[..], &music[..], None), (&b[..], &music[..], None)],
-            &norm,
-            &c,
-            120,
-        );
-        let (start, at, kf, donor) = (1, 10, 81, (1, 150));
-        let mut plain = Batch::default();
-        corpus.push_sequence(&mut plain, 0, start, Some((at, kf)), None, None);
-        let mut spliced = Batch::default();
-        corpus.push_sequence(&mut spliced, 0, start, Some((at, kf)), Some(donor), None);
-        let rotations = ROTATIONS..ROTATIONS + KEY_ROT_DIM;
-        let target = |batch: &Batch, f: usize| batch.targets[(f - start) * P..][..P].to_vec();
-        let token =
-            |batch: &Batch, f: usize| batch.tokens[(f - start) * TOKEN_DIM..][..TOKEN_DIM].to_vec();
-        let own = &corpus.dances[0].motion;
-        let key = &corpus.dances[1].motion[donor.1 * P..][..P];
-        // Untouched until the glide starts (announced at frame 11, due at 81: 50 frames ahead).
-        for f in start..kf - KEY_SPLICE_GLIDE {
-            assert_eq!(target(&spliced, f), target(&plain, f), "frame {f}");
-        }
-        // On the key frame the rotations are the key pose's; the root is the dance's own.
-        let on = target(&spliced, kf);
-        for i in rotations.clone() {
-            assert!(
-                (on[i] - key[i]).abs() < 1e-5,
-                "value {i}: {} against {}",
-                on[i],
-                key[i]
-            );
-        }
-        assert_eq!(on[..ROTATIONS], own[kf * P..kf * P + ROTATIONS]);
-        // Half-way through the glide, half-way there (smoothstep(½) = ½).
-        let mid = kf - KEY_SPLICE_GLIDE / 2;
-        let (m, p) = (target(&spliced, mid), target(&plain, mid));
-        let i = ROTATIONS + 7;
-        let expect = p[i] + 0.5 * (key[i] - own[kf * P + i]);
-        assert!((m[i] - expect).abs() < 0.03 * (key[i] - own[kf * P + i]).abs() + 1e-4);
-        // The previous pose a token carries is the spliced target before it.
-        assert_eq!(token(&spliced, kf)[..P], target(&spliced, kf - 1)[..]);
-        // The key input is the spliced pose, from its announcement on.
-        let k = token(&spliced, start + at);
-        assert_eq!(
-            k[token::KEY_AT..token::KEY_AT + KEY_ROT_DIM],
-            key[rotations.clone()]
-        );
-        assert_eq!(token(&spliced, start + at - 1)[token::FLAG_AT], 0.0);
-        // Released a second after the key frame.
-        let after = kf + KEY_SPLICE_RELEASE;
-        assert_eq!(target(&spliced, after), target(&plain, after));
-        assert_ne!(target(&spliced, kf + 5), target(&plain, kf + 5));
-    }
-
-    #[test]
-    fn pose_drop_hides_that_share_of_previous_poses_and_nothing_else() {
-        let c = NetConfig::tiny();
-        let frames = 200;
-        let motion: Vec<[f32; P]> = (0..frames)
-            .map(|i| std::array::from_fn(|j| (i as f32 * 0.1 + j as f32).sin()))
-            .collect();
-        let music: Vec<[f32; M]> = (0..frames)
-            .map(|i| std::array::from_fn(|j| (i as f32 * 0.2 + j as f32).cos()))
-            .collect();
-        let norm = Normalizer::fit(&motion, &music);
-        let mut corpus = Corpus::new(&[(&motion[..], &music[..], None)], &norm, &c, 32);
-        let hidden = |batch: &Batch| {
-            let tokens: Vec<&[f32]> = batch.tokens.chunks_exact(TOKEN_DIM).collect();
-            let n = tokens
-                .iter()
-                .filter(|t| {
-                    t[token::POSE_AT..token::POSE_AT + P]
-                        .iter()
-                        .all(|&v| v == 0.0)
-                })
-                .count();
-            n as f64 / tokens.len() as f64
-        };
-        let batch = corpus.random_batch(&mut Rng::new(3), 200, 0.3);
-        assert_eq!(hidden(&batch), 0.0);
-        corpus.set_pose_drop(0.7);
-        let dropped = corpus.random_batch(&mut Rng::new(3), 200, 0.3);
-        assert!(
-            (hidden(&dropped) - 0.7).abs() < 0.02,
-            "{}",
-            hidden(&dropped)
-        );
-        // Music, key slots and targets are untouched; only the pose slot is hidden.
-        for (a, b) in dropped
-            .tokens
-            .chunks_exact(TOKEN_DIM)
-            .zip(dropped.targets.chunks_exact(P))
-        {
-            assert!(a[token::POSE_AT + P..].iter().any(|&v| v != 0.0));
-            assert!(b.iter().any(|&v| v != 0.0));
-        }
-        // The validation set sees every pose.
-        assert_eq!(corpus.all_sequences().iter().map(hidden).sum::<f64>(), 0.0);
     }
 
     #[test]
@@ -1917,66 +1331,13 @@ mod tests {
     }
 
     #[test]
-    fn style_balance_evens_out_the_sampled_styles() {
-        let mut c = NetConfig::tiny();
-        c.styles = 4;
-        // Five long waltzes (style 3) against one short cha-cha (style 0), as in tang2018.
-        let long = vec![[0.1f32; P]; 400];
-        let short = vec![[0.1f32; P]; 100];
-        let music = vec![[0.0f32; M]; 400];
-        let mut dances: Vec<DanceInput> = vec![(&short[..], &music[..100], Some(0))];
-        dances.extend((0..5).map(|_| (&long[..], &music[..], Some(3))));
-        let norm = Normalizer::fit(&long, &music);
-        let mut corpus = Corpus::new(&dances, &norm, &c, 16);
-        let cha_cha_share = |corpus: &Corpus| {
-            let mut rng = Rng::new(7);
-            let batch = corpus.random_batch(&mut rng, 2000, 1.0);
-            let rows = batch.styles.chunks_exact(4).step_by(16);
-            rows.filter(|r| r[0] == 1.0).count() as f64 / 2000.0
-        };
-        // By frames: 100 of 2100 frames.
-        assert!((cha_cha_share(&corpus) - 100.0 / 2100.0).abs() < 0.02);
-        assert!((corpus.style_shares()[0].1 - 100.0 / 2100.0).abs() < 1e-9);
-        corpus.set_style_balance(1.0);
-        assert!((cha_cha_share(&corpus) - 0.5).abs() < 0.04);
-        // The key-pose rollouts' sequences are balanced alike.
-        let rollouts = corpus.rollout_batch(&mut Rng::new(9), 2000, 4, 4, 0.0, 1);
-        let rows = rollouts.styles.chunks_exact(4).step_by(16);
-        let share = rows.filter(|r| r[0] == 1.0).count() as f64 / 2000.0;
-        assert!(
-            (share - 0.5).abs() < 0.04,
-            "rollouts' cha-cha share {share}"
-        );
-        assert!((corpus.style_shares()[0].1 - 0.5).abs() < 1e-9);
-        // Half-way: shares as the square roots of the styles' frames.
-        corpus.set_style_balance(0.5);
-        let expect = 10.0 / (10.0 + 2000f64.sqrt());
-        assert!((cha_cha_share(&corpus) - expect).abs() < 0.03);
-        // Style drop hides the style of about that fraction of sequences, whole sequences.
-        corpus.set_style_drop(0.25);
-        let mut rng = Rng::new(8);
-        let batch = corpus.random_batch(&mut rng, 2000, 1.0);
-        let hidden: Vec<bool> = batch
-            .styles
-            .chunks_exact(4 * 16)
-            .map(|seq| seq.iter().all(|&v| v == 0.0))
-            .collect();
-        let share = hidden.iter().filter(|&&h| h).count() as f64 / 2000.0;
-        assert!((share - 0.25).abs() < 0.03, "hidden {share}");
-        for seq in batch.styles.chunks_exact(4 * 16) {
-            let marked = seq.chunks_exact(4).filter(|r| r.contains(&1.0)).count();
-            assert!(marked == 0 || marked == 16);
-        }
-    }
-
-    #[test]
     fn a_non_finite_gradient_is_caught_before_the_update() {
         let (_, corpus, mut trainer, mut rng) = periodic_trainer(None);
         let net = trainer.net.take().expect("a network");
         let batch = corpus.random_batch(&mut rng, 2, 0.0);
         let loss = || {
             let t = tensors(&batch, &trainer.device);
-            net.score(t.tokens, t.styles, t.targets, None).next.mean()
+            net.score(t.tokens, t.styles, t.targets).mean()
         };
         let grads = GradientsParams::from_grads(loss().backward(), &net);
         assert!(gradients_finite(&net, &grads));

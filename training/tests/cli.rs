@@ -8,19 +8,12 @@ fn danced_train() -> Command {
 }
 
 /// The `danced` binary of the same build, beside `danced-train` (a workspace build makes both),
-/// or `None` (with a message) when it was not built.
+/// or `None` when it was not built (the test skips, see `testkit`).
+#[track_caller]
 fn danced() -> Option<PathBuf> {
     let path = Path::new(env!("CARGO_BIN_EXE_danced-train"))
         .with_file_name(format!("danced{}", std::env::consts::EXE_SUFFIX));
-    if path.is_file() {
-        Some(path)
-    } else {
-        eprintln!(
-            "skipping: {} not built (cargo build -p daemon, or test the workspace)",
-            path.display()
-        );
-        None
-    }
+    testkit::require_path(&path, "cargo build -p daemon, or test the workspace").then_some(path)
 }
 
 /// Runs `cmd`, asserts that it succeeded (its stderr in the message), and returns its stdout
@@ -32,15 +25,11 @@ fn succeed(cmd: &mut Command) -> (String, String) {
     (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
 }
 
-/// `../shared/data` beside the repository, or `None` (with a message) when `needed` is absent.
+/// `shared/data` beside the repository, or `None` when `needed` is absent (the test skips, see
+/// `testkit`).
+#[track_caller]
 fn shared_data(needed: &str) -> Option<PathBuf> {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    if data.join(needed).is_dir() {
-        Some(data)
-    } else {
-        eprintln!("skipping: {} not found", data.join(needed).display());
-        None
-    }
+    testkit::require_shared(needed)
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -50,7 +39,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 #[test]
-fn train_writes_a_model_that_generate_and_bench_use() {
+fn the_shipped_recipe_trains_a_model_that_generate_and_bench_use() {
     let Some(data) = shared_data("tang2018") else {
         return;
     };
@@ -58,59 +47,57 @@ fn train_writes_a_model_that_generate_and_bench_use() {
         return;
     };
     let dir = scratch("train");
-    let model = dir.join("tiny.dnn");
+    let recipe =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/default.recipe.toml");
+    // The shipped recipe, every stage cut to 2 steps on a slice of the data; by default and
+    // named, the same model.
+    let model = dir.join("check.dnn");
+    let named = dir.join("named.dnn");
     let (stdout, stderr) = succeed(
         danced_train()
-            .args([
-                "dancer",
-                "--tiny",
-                "--max-steps",
-                "3",
-                "--sequence",
-                "16",
-                "--jobs",
-                "2",
-                "--beat-retime",
-                "0.2",
-                "--style-balance",
-                "0.5",
-                "--style-drop",
-                "0.1",
-                "--weight-average",
-                "0.5",
-            ])
+            .args(["dancer", "--check", "2", "--jobs", "2"])
             .arg("--data")
             .arg(&data)
             .arg("--out")
             .arg(&model),
     );
-    assert!(stdout.contains("trained 3 steps"), "{stdout}");
-    assert!(stderr.contains("seed clip: training dance"), "{stderr}");
-    // Balanced: the 25 waltzes no longer take 80 % of the sequences.
+    for stage in ["dance", "keys", "key-weights"] {
+        assert!(
+            stdout.contains(&format!("{stage}: trained 2 steps")),
+            "{stdout}"
+        );
+    }
     assert!(
-        stderr.contains("style shares of sampled sequences: cha-cha"),
+        stderr.contains("training by the shipped recipe"),
         "{stderr}"
     );
+    assert!(stderr.contains("seed clip: training dance"), "{stderr}");
+    succeed(
+        danced_train()
+            .args(["dancer", "--check", "2", "--jobs", "2", "--recipe"])
+            .arg(&recipe)
+            .arg("--data")
+            .arg(&data)
+            .arg("--out")
+            .arg(&named),
+    );
     let file = model::neural::file::NeuralModel::load(&model).unwrap();
+    let again = model::neural::file::NeuralModel::load(&named).unwrap();
+    assert_eq!(
+        file.tensors, again.tensors,
+        "the default is not the shipped recipe"
+    );
+    assert_eq!(file.training.steps, 6);
+    assert!(file.config.key_to_flow && file.config.styles == 0);
     assert!(file.training.data.contains("retimed within each beat"));
-    assert!(
-        file.training
-            .recipe
-            .ends_with("--style-drop 0.1 --max-steps 3 --weight-average 0.5"),
-        "{}",
-        file.training.recipe
-    );
-    // The model is the weights' average; the last step's weights lie beside it.
-    assert!(
-        stdout.contains("averaged weights (decay 0.5) written"),
-        "{stdout}"
-    );
-    let last = model::neural::file::NeuralModel::load(&dir.join("tiny.last.dnn")).unwrap();
-    assert_eq!(last.training.steps, 3);
-    let (a, l) = (&file.tensors.map, &last.tensors.map);
-    assert_eq!(a.keys().collect::<Vec<_>>(), l.keys().collect::<Vec<_>>());
-    assert!(a.iter().any(|(name, t)| t.data != l[name].data));
-    assert_eq!(a["seed.motion"], l["seed.motion"]);
+    // The recipe is recorded verbatim (after the line that says this was a check), and the
+    // data by its hash.
+    let text = std::fs::read_to_string(&recipe).unwrap();
+    assert!(file.training.recipe.starts_with("# A check of this recipe"));
+    assert!(file.training.recipe.ends_with(&text));
+    assert!(file.training.data_hash.starts_with("sha256:"));
+    assert_eq!(file.training.data_hash.len(), "sha256:".len() + 64);
+    assert_eq!(file.training.data_hash, again.training.data_hash);
     // The model file drives generate (through the streaming sampler) and the bench.
     let out = dir.join("gen.bvh");
     let (stdout, _) = succeed(
@@ -152,15 +139,28 @@ fn train_writes_a_model_that_generate_and_bench_use() {
 }
 
 #[test]
-fn an_unknown_style_to_train_on_is_refused_by_name() {
+fn a_recipe_with_an_unknown_setting_is_refused_by_name() {
+    let dir = scratch("recipe");
+    let recipe = dir.join("r.toml");
+    std::fs::write(
+        &recipe,
+        "[[stage]]\nname = \"a\"\nsteps = 5\nmirror = true\n",
+    )
+    .unwrap();
     let out = danced_train()
-        .args(["dancer", "--styles", "chacha,salsa", "--max-steps", "1"])
+        .args(["dancer", "--recipe"])
+        .arg(&recipe)
         .output()
         .unwrap();
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        stderr.contains("\"salsa\": a style is chacha, rumba, tango or waltz"),
-        "{stderr}"
-    );
+    assert!(stderr.contains("unknown field `mirror`"), "{stderr}");
+    assert!(stderr.contains("r.toml"), "{stderr}");
+    // A flag of the experiments is no option any more.
+    let out = danced_train()
+        .args(["dancer", "--mirror"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -78,10 +78,14 @@ pub struct TrainingSummary {
     /// What the model was trained on (data set, split, dances), and under which terms.
     #[serde(default)]
     pub data: String,
-    /// How it was trained: the `danced-train dancer` (before, `danced train`) options of the run
-    /// (and of the runs it resumed).
+    /// How it was trained: the recipe file's text, verbatim (models trained before recipes
+    /// carry the `danced-train dancer` options of their runs instead).
     #[serde(default)]
     pub recipe: String,
+    /// `sha256:` and the hex digest of every frame each stage trained on (dance names, motion
+    /// and music features, in order): two models with the same hash saw the same data.
+    #[serde(default)]
+    pub data_hash: String,
     /// Frames ahead of the analysis the training music was predicted by (`dsp::predicted_stream`;
     /// 0 for models trained on the analysed frames themselves, before predicted features).
     #[serde(default)]

@@ -3,4 +3,3 @@
 pub mod beats;
 pub mod dancer;
 pub mod downbeats;
-pub mod key_probe;
