@@ -105,6 +105,18 @@ pub fn configured_neural_dancer(settings: &SourceSettings<'_>, seed: u64) -> Res
     Ok(d)
 }
 
+/// Refuses, by name, a style the dancer cannot honour: one other than `auto` for a dancer
+/// without a style input (asked for on the command line or in the configuration).
+pub fn check_style(source: &dyn MotionSource, style: model::style::StyleRequest) -> Result<()> {
+    if style != model::style::StyleRequest::Auto && !source.controls().style {
+        bail!(
+            "style {}: the loaded dancer has no style input (it dances what the music suggests); leave dancer.style / --style at auto",
+            style.name()
+        );
+    }
+    Ok(())
+}
+
 /// Opens the motion source `kind` with `settings`, seeded with `seed`.
 pub fn open_source(
     kind: SourceKind,

@@ -256,6 +256,11 @@ state.send = send;
 function onHello(h) {
   state.hello = h;
   state.mode = h.mode;
+  // What the dancer honours: the page offers no control that would be refused.
+  const honours = h.controls ?? { style: true, key_route: true, beat_accent: true };
+  document.body.classList.toggle('no-style', !honours.style);
+  document.body.classList.toggle('no-route', !honours.key_route);
+  document.body.classList.toggle('no-accent', !honours.beat_accent);
   $('poses').replaceChildren(...h.poses.map((name) => {
     const b = document.createElement('button');
     b.textContent = name;

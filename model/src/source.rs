@@ -106,6 +106,39 @@ impl Default for Controls {
     }
 }
 
+/// The live controls a source honours beyond those every source takes (temperature, key
+/// poses, seed, pause): the daemon refuses the others, counted, rather than pass on what
+/// would change nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SourceControls {
+    /// [`Controls::style`]: a network with a style input.
+    pub style: bool,
+    /// [`Controls::key_route`]: a source that can hand key poses to its network.
+    pub key_route: bool,
+    /// [`Controls::beat_accent`]: a source that retimes its own motion within the beat.
+    pub beat_accent: bool,
+}
+
+impl SourceControls {
+    /// Every control honoured.
+    pub const ALL: SourceControls = SourceControls {
+        style: true,
+        key_route: true,
+        beat_accent: true,
+    };
+}
+
+/// What a source reports of its last frame, for the stats, the status line and the view.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SourceReport {
+    /// The style danced (`None`: the source has no style input).
+    pub style: Option<crate::style::DanceStyle>,
+    /// Where key poses went (`None`: the source has no route to choose).
+    pub key_route: Option<KeyPoseRoute>,
+    /// How often each of its safety nets acted since the last reset (`None`: it has none).
+    pub safety: Option<crate::neural::safety::SafetyCounts>,
+}
+
 /// A streaming, causal motion generator driven by music feature frames.
 pub trait MotionSource {
     /// Output frames per second; `step` must be called once per frame at this rate.
@@ -128,19 +161,14 @@ pub trait MotionSource {
     /// Starts a new performance from scratch, seeding any randomness with `seed`.
     fn reset(&mut self, seed: u64);
 
-    /// Where key poses went at the last frame (`None`: the source has no route to choose).
-    fn key_route(&self) -> Option<KeyPoseRoute> {
-        None
+    /// The controls it honours beyond those every source takes.
+    fn controls(&self) -> SourceControls {
+        SourceControls::default()
     }
 
-    /// The style danced at the last frame (`None`: the source has no style input).
-    fn style(&self) -> Option<crate::style::DanceStyle> {
-        None
-    }
-
-    /// How often each of its safety nets acted since the last reset (`None`: it has none).
-    fn safety_counts(&self) -> Option<crate::neural::safety::SafetyCounts> {
-        None
+    /// What it did at the last frame.
+    fn report(&self) -> SourceReport {
+        SourceReport::default()
     }
 
     /// Changes the style seed mid-performance: the randomness restarts from `seed` while the

@@ -34,7 +34,7 @@ fn dance_to_demo_with(
     let mut dancer: NeuralDancer = daemon::dancer::neural_dancer(&model, seed).unwrap();
     configure(&mut dancer);
     let (poses, _) = common::dance_to_demo(&mut dancer, seconds, temperature, seed);
-    (poses, dancer.safety_counts().map_or(0, |c| c.held))
+    (poses, dancer.report().safety.map_or(0, |c| c.held))
 }
 
 #[test]

@@ -22,9 +22,6 @@ pub struct BenchModelArgs {
     /// Sampling temperature.
     #[arg(long, default_value_t = 1.0)]
     pub temperature: f32,
-    /// Key strength of the dancer timed (other than 1: a second pass of the network).
-    #[arg(long, default_value_t = 1.0)]
-    pub key_strength: f32,
 }
 
 /// Music frames of the built-in demo song (30 s) at the dancer's rate: what the timed frames
@@ -93,7 +90,6 @@ pub fn time_frames(
 pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
     let model = crate::dancer::load_model(args.model.as_deref())?;
     let mut dancer = NeuralDancer::new(&model)?;
-    dancer.set_key_strength(args.key_strength);
     let song = demo_music(dancer.frame_rate())?;
     // Where the first frame lands, to diagnose held frames.
     dancer.reset(1);
@@ -113,7 +109,7 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
     println!(
         "first frame: largest normalised feature {} = {value:.2} ({} held)",
         model::motion::feature_name(worst).unwrap_or_default(),
-        dancer.safety_counts().map_or(0, |c| c.held)
+        dancer.report().safety.map_or(0, |c| c.held)
     );
     let times = time_frames(&mut dancer, &song, args.frames.max(1), args.temperature);
     let q = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
@@ -129,7 +125,7 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
         q(0.5) / 1e3,
         q(0.99) / 1e3,
         times[times.len() - 1] / 1e3,
-        dancer.safety_counts().map_or(0, |c| c.held)
+        dancer.report().safety.map_or(0, |c| c.held)
     );
     Ok(())
 }

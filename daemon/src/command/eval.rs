@@ -43,18 +43,6 @@ pub struct EvalArgs {
     /// the neural rows: the shipped setting, without the final blend, and the network alone.
     #[arg(long, conflicts_with_all = ["quick", "ground_truth", "music", "training_songs"])]
     pub keys: bool,
-    /// How strongly the neural rows' style steers them (models with a style input: 1 as
-    /// trained, 0 unconditioned, above 1 exaggerated).
-    #[arg(long, default_value_t = 1.0)]
-    pub style_strength: f32,
-    /// How strongly a key handed to the network steers it in the neural rows (1 as trained,
-    /// above 1 exaggerated; the network then runs a second pass without the key).
-    #[arg(long, default_value_t = 1.0)]
-    pub key_strength: f32,
-    /// Frames over which the neural rows blend a key pose in before its deadline (the end
-    /// blend; the rows without it stay without it).
-    #[arg(long, default_value_t = model::neural::dancer::KEY_BLEND_FRAMES)]
-    pub key_blend_frames: u32,
     /// Random seed of the generated rows.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -73,17 +61,12 @@ fn ablation(name: &str) -> bool {
     [NO_ACCENT, FRESH_NOISE, NO_FOOT_LOCK].contains(&name)
 }
 
-/// The neural dancer on `model`, seeded, steered (style and key strength) and blending keys
-/// in as the options say.
+/// The neural dancer on `model`, seeded as the options say.
 fn eval_dancer(
     o: &EvalArgs,
     model: &model::neural::file::NeuralModel,
 ) -> Result<model::neural::dancer::NeuralDancer> {
-    let mut d = crate::dancer::neural_dancer(model, o.seed)?;
-    d.set_style_strength(o.style_strength);
-    d.set_key_strength(o.key_strength);
-    d.set_key_blend_frames(o.key_blend_frames);
-    Ok(d)
+    crate::dancer::neural_dancer(model, o.seed)
 }
 
 /// The dancers scored: retrieval (and on the full library), the neural dancer on `model` as
@@ -203,7 +186,7 @@ pub fn eval(o: &EvalArgs) -> Result<()> {
             let (motions, us) = set.generate(dancer.as_mut(), t, o.seed);
             let label = format!("{name} T={t}");
             eprintln!("{label}: {us:.1} µs per frame");
-            if let Some(c) = dancer.safety_counts() {
+            if let Some(c) = dancer.report().safety {
                 // Of the last validation song (the counts restart with each song).
                 eprintln!("  {label}, last song: {}", c.summary());
             }

@@ -151,6 +151,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         }
         _ => crate::dancer::open_source(kind, &settings, seed)?,
     };
+    crate::dancer::check_style(dancer.as_ref(), style)?;
     let load_s = started.elapsed().as_secs_f64();
     let opts = AnalyzeOptions {
         start_s: start,
@@ -211,7 +212,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         load_s,
         1e6 * step_s / poses.len().max(1) as f64
     );
-    if let Some(c) = dancer.safety_counts() {
+    if let Some(c) = dancer.report().safety {
         let nets = if *network_only {
             "network only (nets off)"
         } else {

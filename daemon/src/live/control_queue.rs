@@ -23,7 +23,7 @@ use protocols::control::{
 use super::sink::PoseBank;
 use super::stats::Stats;
 use super::wire::{ControlEvent, Quantize};
-use model::source::KeyPoseRoute;
+use model::source::{KeyPoseRoute, SourceControls};
 use model::style::{DanceStyle, StyleRequest};
 
 /// Events one input may queue before the motion thread takes them.
@@ -119,6 +119,7 @@ fn style_of_bits(bits: u64) -> StyleRequest {
 /// Builds the control path before a run: hands out one sender per input, then becomes the
 /// motion thread's [`ControlReceiver`].
 pub struct ControlHub {
+    honoured: SourceControls,
     params: Arc<Params>,
     names: Arc<HashMap<String, u16>>,
     table: Vec<[Quat; JOINT_COUNT]>,
@@ -140,6 +141,7 @@ impl ControlHub {
             }
         }
         Self {
+            honoured: SourceControls::ALL,
             params: Arc::new(Params::default()),
             names: Arc::new(names),
             table,
@@ -148,11 +150,20 @@ impl ControlHub {
         }
     }
 
+    /// Refuses the controls the source does not honour (style, key route, beat accent), each
+    /// counted in `controls_unsupported`; a new hub passes them all on.
+    pub fn honouring(mut self, controls: SourceControls) -> Self {
+        self.honoured = controls;
+        self
+    }
+
     /// A sender for one more input (each input thread owns its own).
     pub fn sender(&mut self) -> ControlSender {
         let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
         self.consumers.push(consumer);
         ControlSender {
+            honoured: self.honoured,
+            warned: [false; 3],
             producer,
             params: self.params.clone(),
             names: self.names.clone(),
@@ -228,10 +239,44 @@ pub enum ControlRefusal {
     RateLimited,
     /// The queue to the motion thread is full.
     QueueFull,
+    /// The dancer does not honour this control (e.g. a style for a model without a style
+    /// input).
+    Unsupported(UnsupportedControl),
+}
+
+/// A control some dancers do not honour.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UnsupportedControl {
+    /// `/danced/control/style`.
+    Style,
+    /// `/danced/control/keypose/route`.
+    KeyRoute,
+    /// `/danced/control/accent`.
+    BeatAccent,
+}
+
+impl UnsupportedControl {
+    /// What the performer is told, once per input and control.
+    fn explanation(self) -> &'static str {
+        match self {
+            UnsupportedControl::Style => {
+                "/danced/control/style refused: the loaded dancer has no style input"
+            }
+            UnsupportedControl::KeyRoute => {
+                "/danced/control/keypose/route refused: the loaded dancer shows key poses over its dance and has no other route"
+            }
+            UnsupportedControl::BeatAccent => {
+                "/danced/control/accent refused: the loaded dancer follows the beat by itself and has no beat accent"
+            }
+        }
+    }
 }
 
 /// One input's end of the control path (not `Clone`: each input gets its own from the hub).
 pub struct ControlSender {
+    honoured: SourceControls,
+    /// Whether each [`UnsupportedControl`] has been explained in the log yet.
+    warned: [bool; 3],
     producer: rtrb::Producer<MotionCommand>,
     params: Arc<Params>,
     names: Arc<HashMap<String, u16>>,
@@ -247,9 +292,15 @@ fn in_range(x: f32, (lo, hi): (f32, f32)) -> bool {
 impl ControlSender {
     /// Validates, resolves and passes on one control; every outcome is counted in the stats
     /// (`controls_accepted`, `controls_rejected`, `controls_coalesced`,
-    /// `controls_rate_limited`, `controls_dropped`).
+    /// `controls_rate_limited`, `controls_dropped`, `controls_unsupported`); the first refusal
+    /// of each unsupported control is also explained in the log.
     pub fn send(&mut self, event: ControlEvent) -> Result<(), ControlRefusal> {
         let r = self.pass_on(event);
+        if let Err(ControlRefusal::Unsupported(c)) = &r
+            && !std::mem::replace(&mut self.warned[*c as usize], true)
+        {
+            tracing::warn!("{} (counted as controls_unsupported)", c.explanation());
+        }
         let s = &self.stats;
         let counter = match &r {
             Ok(()) => &s.controls_accepted,
@@ -258,6 +309,7 @@ impl ControlSender {
             }
             Err(ControlRefusal::RateLimited) => &s.controls_rate_limited,
             Err(ControlRefusal::QueueFull) => &s.controls_dropped,
+            Err(ControlRefusal::Unsupported(_)) => &s.controls_unsupported,
         };
         counter.fetch_add(1, Ordering::Relaxed);
         r
@@ -273,6 +325,14 @@ impl ControlSender {
 
     fn pass_on(&mut self, event: ControlEvent) -> Result<(), ControlRefusal> {
         let p = &self.params;
+        let honoured = self.honoured;
+        let supported = |yes: bool, control| {
+            if yes {
+                Ok(())
+            } else {
+                Err(ControlRefusal::Unsupported(control))
+            }
+        };
         let float = |x: f32, range| {
             in_range(x, range)
                 .then_some(u64::from(x.to_bits()))
@@ -284,7 +344,9 @@ impl ControlSender {
                 return Ok(());
             }
             ControlEvent::BeatAccent(a) => {
-                self.offer(&p.accent, float(a, BEAT_ACCENT_RANGE)?);
+                let bits = float(a, BEAT_ACCENT_RANGE)?;
+                supported(honoured.beat_accent, UnsupportedControl::BeatAccent)?;
+                self.offer(&p.accent, bits);
                 return Ok(());
             }
             ControlEvent::TransitionBeats(b) => {
@@ -304,11 +366,13 @@ impl ControlSender {
             }
             ControlEvent::DanceStyle(name) => {
                 let request = StyleRequest::parse(&name).ok_or(ControlRefusal::OutOfRange)?;
+                supported(honoured.style, UnsupportedControl::Style)?;
                 self.offer(&p.style, style_bits(request));
                 return Ok(());
             }
             ControlEvent::KeyPoseRoute(name) => {
                 let route = KeyPoseRoute::parse(&name).ok_or(ControlRefusal::OutOfRange)?;
+                supported(honoured.key_route, UnsupportedControl::KeyRoute)?;
                 self.offer(&p.key_route, route.index() as u64);
                 return Ok(());
             }
@@ -508,6 +572,62 @@ mod tests {
             assert_eq!(route.index(), i);
             assert_eq!(KeyPoseRoute::from_index(i), Some(route));
         }
+    }
+
+    #[test]
+    fn controls_the_dancer_does_not_honour_are_refused_and_counted() {
+        let stats = Arc::new(Stats::new());
+        // A dancer without a style input that routes key poses and takes an accent.
+        let honoured = SourceControls {
+            style: false,
+            ..SourceControls::ALL
+        };
+        let mut hub =
+            ControlHub::new(&MemoryPoseBank::builtin(), stats.clone()).honouring(honoured);
+        let mut tx = hub.sender();
+        let (mut rx, _) = hub.into_receiver();
+        for name in ["rumba", "auto"] {
+            assert_eq!(
+                tx.send(ControlEvent::DanceStyle(name.into())),
+                Err(ControlRefusal::Unsupported(UnsupportedControl::Style))
+            );
+        }
+        // A name that is no style is still a bad argument, not an unsupported control.
+        assert_eq!(
+            tx.send(ControlEvent::DanceStyle("polka".into())),
+            Err(ControlRefusal::OutOfRange)
+        );
+        tx.send(ControlEvent::KeyPoseRoute("network".into()))
+            .unwrap();
+        tx.send(ControlEvent::BeatAccent(0.2)).unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![
+                MotionCommand::BeatAccent(0.2),
+                MotionCommand::KeyPoseRoute(KeyPoseRoute::Network)
+            ]
+        );
+        assert_eq!(stats.controls_unsupported.load(Ordering::Relaxed), 2);
+        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 1);
+        assert_eq!(stats.controls_accepted.load(Ordering::Relaxed), 2);
+        // A dancer that honours none of the three (the retrieval dancer).
+        let stats = Arc::new(Stats::new());
+        let mut hub = ControlHub::new(&MemoryPoseBank::builtin(), stats.clone())
+            .honouring(SourceControls::default());
+        let mut tx = hub.sender();
+        for event in [
+            ControlEvent::DanceStyle("waltz".into()),
+            ControlEvent::KeyPoseRoute("overlay".into()),
+            ControlEvent::BeatAccent(0.5),
+        ] {
+            assert!(matches!(
+                tx.send(event),
+                Err(ControlRefusal::Unsupported(_))
+            ));
+        }
+        assert_eq!(stats.controls_unsupported.load(Ordering::Relaxed), 3);
+        // Temperature and key poses every dancer takes.
+        tx.send(ControlEvent::Temperature(0.7)).unwrap();
     }
 
     #[test]

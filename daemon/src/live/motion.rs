@@ -144,9 +144,10 @@ pub fn run(
             .beat_accent
             .set(st.controls.beat_accent.unwrap_or(f32::NAN));
         stats.paused.store(u32::from(st.paused), Ordering::Relaxed);
-        stats.set_key_route(source.key_route());
+        let report = source.report();
+        stats.set_key_route(report.key_route);
         stats.set_style_danced(
-            source.style(),
+            report.style,
             st.controls.style == model::style::StyleRequest::Auto,
         );
         let msg = match queues.features.pop() {
@@ -217,7 +218,7 @@ pub fn run(
             .processing
             .record_s(now_ns.saturating_sub(msg.ingest_wall_ns) as f64 * 1e-9);
         stats.model_frames.fetch_add(1, Ordering::Relaxed);
-        if let Some(c) = source.safety_counts() {
+        if let Some(c) = source.report().safety {
             stats.safety.store(&c);
         }
         next_time = t + 1.0 / rate;

@@ -98,13 +98,14 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         },
         config.dancer.seed,
     )?;
+    crate::dancer::check_style(source.as_ref(), config.dancer.style_request())?;
     let poses = match &config.control.poses {
         Some(p) => crate::pose_bank::PoseBank::load(p)?,
         None => crate::pose_bank::PoseBank::shipped()?,
     };
     let osc = OscSink::from_config(config)?;
     let targets = osc.describe();
-    let mut hub = ControlHub::new(&poses, ctx.stats.clone());
+    let mut hub = ControlHub::new(&poses, ctx.stats.clone()).honouring(source.controls());
     let controls = ControlInputs::start(config, &mut hub, ctx.stop.clone())?;
     let mut sink: Box<dyn FrameSink> = Box::new(osc);
     let view = if config.view.enabled {
@@ -115,6 +116,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             rate_hz: config.output.rate_hz,
             model_rate_hz: source.frame_rate(),
             lead_ms: config.output.lead_ms,
+            controls: source.controls().into(),
             ..ViewHello::default()
         };
         let feed = LiveFeed {
@@ -256,7 +258,7 @@ pub fn summary(r: &StatsReport) -> String {
          audio        {} frames dropped, {} stream errors, {} stalls, {} reconnects ({} failed tries), {} blocks contended, {} old streams stuck, {} frames of silence inserted\n\
          queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
          packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
-         controls     {} applied, {} rejected, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
+         controls     {} applied, {} rejected, {} not honoured by the dancer, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
          control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}{}",
         r.wall_s,
         r.frames_sent,
@@ -311,6 +313,7 @@ pub fn summary(r: &StatsReport) -> String {
         r.vrchat_missing_bones,
         r.controls_accepted,
         r.controls_rejected,
+        r.controls_unsupported,
         r.controls_coalesced,
         r.controls_rate_limited,
         r.controls_dropped,

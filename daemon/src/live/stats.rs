@@ -187,6 +187,9 @@ pub struct Stats {
     pub controls_coalesced: AtomicU64,
     /// Control events refused by the per-address rate limit.
     pub controls_rate_limited: AtomicU64,
+    /// Control events refused because the dancer does not honour them (a style for a model
+    /// without a style input, …).
+    pub controls_unsupported: AtomicU64,
     /// Datagrams the operating system refused to send.
     pub send_errors: AtomicU64,
     /// Non-finite values the encoders replaced before sending.
@@ -272,6 +275,7 @@ impl Stats {
             controls_dropped: AtomicU64::new(0),
             controls_coalesced: AtomicU64::new(0),
             controls_rate_limited: AtomicU64::new(0),
+            controls_unsupported: AtomicU64::new(0),
             send_errors: AtomicU64::new(0),
             non_finite_replaced: AtomicU64::new(0),
             vrchat_missing_bones: AtomicU64::new(0),
@@ -400,6 +404,7 @@ impl Stats {
             controls_dropped: load(&self.controls_dropped),
             controls_coalesced: load(&self.controls_coalesced),
             controls_rate_limited: load(&self.controls_rate_limited),
+            controls_unsupported: load(&self.controls_unsupported),
             send_errors: load(&self.send_errors),
             non_finite_replaced: load(&self.non_finite_replaced),
             vrchat_missing_bones: load(&self.vrchat_missing_bones),
@@ -548,6 +553,8 @@ pub struct StatsReport {
     pub controls_coalesced: u64,
     /// Control events refused by the per-address rate limit.
     pub controls_rate_limited: u64,
+    /// Control events refused because the dancer does not honour them.
+    pub controls_unsupported: u64,
     /// Datagrams the operating system refused to send.
     pub send_errors: u64,
     /// Non-finite values the encoders replaced.

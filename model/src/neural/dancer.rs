@@ -25,7 +25,9 @@ use crate::neural::safety::{SafetyCounts, SafetyNets};
 use crate::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 use crate::rig::{Pose, Skeleton};
 use crate::rotation::{quat_to_6d, sixd_to_quat};
-use crate::source::{Controls, KeyPoseRoute, MotionSource, finite_clamp};
+use crate::source::{
+    Controls, KeyPoseRoute, MotionSource, SourceControls, SourceReport, finite_clamp,
+};
 use crate::style::{DanceStyle, StyleFromMusic, StyleRequest};
 
 /// A normalised output beyond this many standard deviations counts as exploding.
@@ -74,38 +76,9 @@ pub const RESTART_AFTER_HELD: u32 = 4;
 /// Frames over which the pose glides from where the dancer stood to the restarted motion.
 pub const RESTART_BLEND_FRAMES: u32 = 10;
 
-/// Pushes `token` through `runtime` and `plain_token` (the same without its key) through the
-/// unconditioned twin `plain` (which keeps the same past, so the dance can be steered at any
-/// frame), steering `runtime` by `strength`.
-fn push_guided(
-    runtime: &mut Runtime,
-    plain: Option<&mut Runtime>,
-    token: &[f32],
-    plain_token: &[f32],
-    strength: f32,
-) {
-    runtime.push(token);
-    if let Some(plain) = plain {
-        plain.push(plain_token);
-        if strength != 1.0 {
-            runtime.guide(plain, strength);
-        }
-    }
-}
-
 /// The neural motion source.
 pub struct NeuralDancer {
     runtime: Runtime,
-    /// The same network fed the same tokens without a style or a key, for a model with a
-    /// style input or a key strength other than 1 (the reference [`Runtime::guide`] steers
-    /// from).
-    plain: Option<Runtime>,
-    /// How strongly the style steers the dance (1: as trained).
-    style_strength: f32,
-    /// How strongly a key handed to the network steers it (1: as trained).
-    key_strength: f32,
-    /// This frame's token without its key, for `plain`.
-    plain_token: Vec<f32>,
     norm: Normalizer,
     seed_motion: Vec<f32>,
     /// Per style (by index), its own seed clip, normalised (motion, music); empty for a model
@@ -162,11 +135,6 @@ impl NeuralDancer {
     /// A dancer running `model` (validated already if it came from [`NeuralModel::load`]).
     pub fn new(model: &NeuralModel) -> Result<Self, ModelFileError> {
         let runtime = Runtime::new(&model.tensors, &model.config)?;
-        let plain = if model.config.styles > 0 {
-            Some(Runtime::new(&model.tensors, &model.config)?)
-        } else {
-            None
-        };
         let norm = model.normalizer()?;
         let (motion, music) = model.seed_clip()?;
         let (seed_motion, seed_music) = normalised_clip(&norm, motion, music);
@@ -198,10 +166,6 @@ impl NeuralDancer {
         let mut d = NeuralDancer {
             horizon_frames: model.training.horizon_frames,
             runtime,
-            plain,
-            style_strength: 1.0,
-            key_strength: 1.0,
-            plain_token: vec![0.0; TOKEN_DIM],
             norm,
             low,
             high,
@@ -311,9 +275,6 @@ impl NeuralDancer {
     /// The seed clip of the style danced now (its own, where the model has one).
     fn prime(&mut self) {
         self.runtime.reset();
-        if let Some(plain) = self.plain.as_mut() {
-            plain.reset();
-        }
         let (seed_motion, seed_music) = match self.style_seeds.get(self.style.index()) {
             Some(Some((m, x))) => (m, x),
             _ => (&self.seed_motion, &self.seed_music),
@@ -326,39 +287,11 @@ impl NeuralDancer {
                 &seed_music[f * FEATURE_DIM..(f + 1) * FEATURE_DIM],
                 None,
             );
-            push_guided(
-                &mut self.runtime,
-                self.plain.as_mut(),
-                &self.token,
-                &self.token,
-                self.style_strength,
-            );
+            self.runtime.push(&self.token);
         }
         self.previous
             .copy_from_slice(&seed_motion[(n - 1) * MOTION_FEATURE_DIM..]);
         self.norm.unpose(&self.previous, &mut self.previous_raw);
-    }
-
-    /// Sets how strongly the style steers the dance: 1 as trained (the default), 0 not at
-    /// all, above 1 exaggerated (non-finite or negative: 1). A model without a style input
-    /// ignores it.
-    pub fn set_style_strength(&mut self, strength: f32) {
-        self.style_strength = strength_or_one(strength);
-    }
-
-    /// Sets how strongly a key pose handed to the network (the network route, or the end
-    /// blend off) steers it: 1 as trained (the default), 0 through the flow's own key input
-    /// alone, above 1 exaggerated (non-finite or negative: 1). While a key is pending this
-    /// strength steers instead of the style's. Other than 1, every frame also runs the
-    /// network without the key, a second transformer pass; set it before dancing (it sets up
-    /// that second pass, from where the dancer stands).
-    pub fn set_key_strength(&mut self, strength: f32) {
-        self.key_strength = strength_or_one(strength);
-        if self.key_strength != 1.0 && self.plain.is_none() {
-            let mut plain = self.runtime.clone();
-            plain.set_style(None);
-            self.plain = Some(plain);
-        }
     }
 
     /// Retimes the raw `features` of the next frame within the beat (`beat_cos`: cosine of the
@@ -472,25 +405,7 @@ impl MotionSource for NeuralDancer {
             &self.music,
             key.filter(|_| !overlay).map(|f| (&self.key[..], f)),
         );
-        let keyed = self.token[token::FLAG_AT] > 0.0;
-        // Only a second pass reads the token without its key, and only a keyed one differs.
-        let plain_token = if keyed && self.plain.is_some() {
-            token::fill(&mut self.plain_token, &self.previous, &self.music, None);
-            &self.plain_token
-        } else {
-            &self.token
-        };
-        push_guided(
-            &mut self.runtime,
-            self.plain.as_mut(),
-            &self.token,
-            plain_token,
-            if keyed {
-                self.key_strength
-            } else {
-                self.style_strength
-            },
-        );
+        self.runtime.push(&self.token);
         let t = finite_clamp(controls.temperature, 0.0, f32::INFINITY);
         let rho = self.noise_correlation;
         let fresh = (1.0 - rho * rho).sqrt();
@@ -635,16 +550,20 @@ impl MotionSource for NeuralDancer {
         self.foot_lock.reset();
     }
 
-    fn safety_counts(&self) -> Option<SafetyCounts> {
-        Some(self.counts)
+    fn controls(&self) -> SourceControls {
+        SourceControls {
+            style: self.has_style_input(),
+            key_route: true,
+            beat_accent: true,
+        }
     }
 
-    fn style(&self) -> Option<DanceStyle> {
-        self.has_style_input().then_some(self.style)
-    }
-
-    fn key_route(&self) -> Option<KeyPoseRoute> {
-        Some(self.route_now)
+    fn report(&self) -> SourceReport {
+        SourceReport {
+            style: self.has_style_input().then_some(self.style),
+            key_route: Some(self.route_now),
+            safety: Some(self.counts),
+        }
     }
 
     fn reseed(&mut self, seed: u64) {
@@ -670,15 +589,6 @@ fn normalised_clip(norm: &Normalizer, motion: &[f32], music: &[f32]) -> (Vec<f32
         norm.music(raw, out);
     }
     (m, x)
-}
-
-/// A guidance strength as given, or 1 (as trained) where it is not finite or negative.
-fn strength_or_one(strength: f32) -> f32 {
-    if strength.is_finite() && strength >= 0.0 {
-        strength
-    } else {
-        1.0
-    }
 }
 
 /// A beat accent depth in [0, 0.9] (non-finite: 0).
@@ -711,7 +621,8 @@ mod tests {
     use glam::Quat;
 
     fn counts(d: &NeuralDancer) -> SafetyCounts {
-        d.safety_counts()
+        d.report()
+            .safety
             .expect("the neural dancer has safety nets")
     }
 
@@ -836,7 +747,7 @@ mod tests {
                     ..Controls::default()
                 };
                 d.step(&music, &controls, &mut pose);
-                routes.push(d.key_route().unwrap());
+                routes.push(d.report().key_route.unwrap());
                 poses.push(pose);
             }
             (routes, poses)
@@ -872,67 +783,6 @@ mod tests {
         assert_ne!(from_start, live);
     }
 
-    #[test]
-    fn the_key_strength_steers_only_while_a_key_is_pending() {
-        let music = vec![[0.1f32; FEATURE_DIM]; 3];
-        // A key due at frame 39, announced from frame 20, handed to the network.
-        let run = |d: &mut NeuralDancer| {
-            d.reset(5);
-            let mut pose = Pose::rest();
-            (0..60)
-                .map(|i| {
-                    let controls = Controls {
-                        temperature: 0.5,
-                        key_pose: (20..40).contains(&i).then(|| KeyPoseTarget {
-                            rotations: [Quat::from_rotation_x(0.8); 22],
-                            frames_to_go: 39 - i as u32,
-                        }),
-                        ..Controls::default()
-                    };
-                    d.step(&music, &controls, &mut pose);
-                    pose
-                })
-                .collect::<Vec<Pose>>()
-        };
-        // With a style input (its unconditioned pass already there) and without (the key
-        // strength sets one up).
-        for styles in [4, 0] {
-            let c = NetConfig {
-                styles,
-                ..NetConfig::tiny()
-            };
-            let mut tensors = init_net(&c, 1);
-            tensors.perturb(2, 0.05);
-            let mut d = NeuralDancer::new(&NeuralModel {
-                config: c,
-                tensors,
-                training: TrainingSummary::default(),
-            })
-            .unwrap();
-            d.set_key_pose_route(KeyPoseRoute::Network);
-            let as_trained = run(&mut d);
-            d.set_key_strength(1.0);
-            assert_eq!(run(&mut d), as_trained);
-            d.set_key_strength(2.5);
-            let steered = run(&mut d);
-            assert_eq!(
-                steered[..20],
-                as_trained[..20],
-                "no key yet: the same dance"
-            );
-            assert!(
-                rotation_gap(&steered[20..40], &as_trained[20..40]) > 0.0,
-                "the key is steered ({styles} styles)"
-            );
-            assert!(steered.iter().all(|p| p.is_finite()));
-        }
-        // Shown over the dance, the key never reaches the network: nothing to steer.
-        let mut shown = dancer(0.05);
-        let overlay = run(&mut shown);
-        shown.set_key_strength(2.5);
-        assert_eq!(run(&mut shown), overlay);
-    }
-
     /// Summed angle between two runs' joint rotations, radians.
     fn rotation_gap(a: &[Pose], b: &[Pose]) -> f32 {
         a.iter()
@@ -940,40 +790,6 @@ mod tests {
             .flat_map(|(p, q)| p.local_rotations.iter().zip(&q.local_rotations))
             .map(|(r, s)| r.angle_between(*s))
             .sum()
-    }
-
-    #[test]
-    fn the_style_strength_scales_how_far_the_style_moves_the_dance() {
-        let c = NetConfig::tiny();
-        let mut tensors = init_net(&c, 1);
-        tensors.perturb(2, 0.05);
-        let mut model = NeuralModel {
-            config: c,
-            tensors,
-            training: TrainingSummary::default(),
-        };
-        let cha = StyleRequest::Style(DanceStyle::ChaCha);
-        let mut d = NeuralDancer::new(&model).unwrap();
-        let as_trained = styled_run(&mut d, cha);
-        d.set_style_strength(f32::NAN);
-        assert_eq!(styled_run(&mut d, cha), as_trained, "NaN is not taken");
-        d.set_style_strength(0.0);
-        let off = styled_run(&mut d, cha);
-        d.set_style_strength(2.0);
-        let strong = styled_run(&mut d, cha);
-        // Strength 0 is the network with every style row zero: no style at all.
-        let rows = c.styles * c.d_model;
-        model
-            .tensors
-            .insert(STYLE_EMBEDDING, &[c.styles, c.d_model], vec![0.0; rows]);
-        let unconditioned = styled_run(&mut NeuralDancer::new(&model).unwrap(), cha);
-        assert_eq!(off, unconditioned);
-        let (one, two) = (
-            rotation_gap(&as_trained, &unconditioned),
-            rotation_gap(&strong, &unconditioned),
-        );
-        assert!(one > 0.0 && two > 1.5 * one, "gap at 1: {one}, at 2: {two}");
-        assert!(strong.iter().all(|p| p.is_finite()));
     }
 
     #[test]

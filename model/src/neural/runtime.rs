@@ -316,18 +316,6 @@ impl Runtime {
         &self.ctx[..d]
     }
 
-    /// Moves the last pushed token's transformer context along its condition's direction (a
-    /// style, a key): `plain`'s context (the same past without the condition) plus
-    /// `strength` times this one's difference from it. 0 dances unconditioned, 1 as
-    /// conditioned, above 1 the condition exaggerated (classifier-free guidance, as diffusion
-    /// models steer by their condition).
-    pub fn guide(&mut self, plain: &Runtime, strength: f32) {
-        let d = self.config.d_model;
-        for (c, p) in self.ctx[..d].iter_mut().zip(&plain.ctx[..d]) {
-            *c = p + strength * (*c - p);
-        }
-    }
-
     /// The flow's inverse at the last pushed token's context: `z` → normalised pose in `out`.
     pub fn sample(&mut self, z: &[f32], out: &mut [f32]) {
         let f = self.config.flow();
