@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use daemon::live::control_queue::ControlHub;
 use daemon::live::context::LiveContext;
+use daemon::live::control_queue::ControlHub;
 use daemon::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
 use daemon::live::replay::{self, ReplayAudio, ReplaySettings};
 use daemon::live::sink::{MemoryPoseBank, PoseBank};

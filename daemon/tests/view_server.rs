@@ -8,8 +8,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use daemon::live::control_queue::ControlHub;
 use daemon::frame::FrameBuilder;
+use daemon::live::control_queue::ControlHub;
 use daemon::live::sink::{FrameSink, MemoryPoseBank};
 use daemon::live::stats::Stats;
 use daemon::view::assets::Assets;

@@ -4,9 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use daemon::demo_track::{DEMO_RATE, demo_track};
-use offline::analysis::{AnalyzeOptions, analyze_file, analyze_samples};
 use dsp::feature::{FEATURE_DIM, FeatureLayout};
 use dsp::metrics;
+use offline::analysis::{AnalyzeOptions, analyze_file, analyze_samples};
 
 fn options(model_rate: Option<f64>) -> AnalyzeOptions {
     AnalyzeOptions {

@@ -2,8 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
-use offline::dataset::{build_dance, is_validation, write_dataset};
 use dsp::feature::FeatureLayout;
+use offline::dataset::{build_dance, is_validation, write_dataset};
 
 #[test]
 fn split_is_deterministic_and_stratified_by_style() {

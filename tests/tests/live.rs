@@ -6,8 +6,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use crossbeam_channel::{Receiver, unbounded};
-use daemon::live::control_queue::ControlHub;
 use daemon::live::context::LiveContext;
+use daemon::live::control_queue::ControlHub;
 use daemon::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
 use daemon::live::replay::{self, ReplayAudio, ReplaySettings};
 use daemon::live::sink::{ChannelSink, FrameSink, MemoryPoseBank, SinkItem};

@@ -159,8 +159,8 @@ mod tests {
     use super::*;
     use crate::device::cpu_device;
     use crate::layers::values;
-    use model::body_shape::body_shape;
     use glam::Quat;
+    use model::body_shape::body_shape;
     use model::motion::MOTION_FEATURE_DIM;
     use model::neural::rng::Rng;
     use model::neural::token::key_rotations;
