@@ -1,6 +1,10 @@
 //! danced: listens to music and makes a character dance to it, live.
 //!
-//! This crate wires the `dsp` analysis to files, commands and the live pipeline.
+//! The body of the `danced` binary: the live pipeline ([`live`]) and the browser view
+//! ([`view`]), the shipped dancers ([`dancer`]), dancing a whole song offline
+//! ([`offline_dance`]), the measurements ([`bench`](mod@bench), [`eval`]), and one module per
+//! command ([`command`]). The work on files (decoding, offline analysis, the training data) is
+//! the `offline` crate's, shared with `danced-train`.
 
 #![warn(missing_docs)]
 
