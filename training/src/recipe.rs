@@ -273,13 +273,26 @@ mod tests {
         let r = DancerRecipe::shipped();
         let names: Vec<_> = r.stages.iter().map(|s| s.name.as_str()).collect();
         assert_eq!(names, ["dance", "keys", "key-weights"]);
-        let steps: u64 = r.stages.iter().map(|s| s.steps).sum();
-        // The shipped model file's step count.
-        assert_eq!(steps, 10_936);
         assert_eq!(r.stages[2].train_only, Some(TrainOnly::Key));
         let rollout = r.stages[1].rollout.as_ref().unwrap();
         assert_eq!(rollout.backprop_steps, Some(1));
         assert_eq!(rollout.critic.as_ref().unwrap().floor, Some(-269.0));
+    }
+
+    #[test]
+    fn the_recipe_builds_the_shipped_models_network() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/models/default.dnn");
+        let shipped = model::neural::file::NeuralModel::load(&path).unwrap();
+        let key_to_flow = DancerRecipe::shipped().stages.iter().any(|s| s.key_to_flow);
+        assert_eq!(
+            shipped.config,
+            model::neural::config::NetConfig {
+                key_to_flow,
+                ..Default::default()
+            }
+        );
+        let steps: u64 = DancerRecipe::shipped().stages.iter().map(|s| s.steps).sum();
+        assert_eq!(shipped.training.steps, steps);
     }
 
     #[test]

@@ -84,7 +84,8 @@ pub struct NetConfig {
 impl Default for NetConfig {
     /// The shipped size: 3 × 128-wide blocks over a 2.56 s window, no look-ahead (the music
     /// is predicted to each frame's time instead, see `dsp::predicted_stream`), 8 flow steps,
-    /// conditioned on the four styles.
+    /// no style input (the shipped recipe's first stage builds this; its second gives the flow
+    /// the key pose).
     fn default() -> Self {
         NetConfig {
             d_model: 128,
@@ -95,7 +96,7 @@ impl Default for NetConfig {
             lookahead: 0,
             flow_steps: 8,
             flow_hidden: 192,
-            styles: crate::style::DanceStyle::COUNT,
+            styles: 0,
             key_to_flow: false,
             level_to_flow: false,
         }

@@ -258,7 +258,6 @@ fn train_stage(
         }
         None => {
             let config = NetConfig {
-                styles: 0,
                 key_to_flow: stage.key_to_flow,
                 ..NetConfig::default()
             };
