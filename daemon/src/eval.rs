@@ -1018,11 +1018,9 @@ mod tests {
 
     #[test]
     fn training_songs_are_scored_without_a_validation_dance() {
-        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-        if !data.join("tang2018").is_dir() {
-            eprintln!("skipping: {} not found", data.join("tang2018").display());
+        let Some(data) = testkit::require_shared("tang2018") else {
             return;
-        }
+        };
         let split = offline::dataset::dances_with_split(&data).unwrap();
         let validation: Vec<&String> = split.iter().filter(|d| d.2).map(|d| &d.1).collect();
         let set = EvalSet::load_scoring(&data, 2, ScoredDances::Training).unwrap();

@@ -2,8 +2,6 @@
 //! true downbeat, as a receiver sees it over UDP (the measurement `danced bench cues` makes on
 //! more songs and cues).
 
-use std::path::Path;
-
 use daemon::bench::cues::measure_bar_cues;
 use daemon::bench::lag::LagRun;
 use daemon::live::replay::ReplayAudio;
@@ -14,7 +12,7 @@ const TOLERANCE_S: f64 = 0.1;
 
 #[test]
 fn key_poses_cued_on_the_next_bar_land_on_downbeats() {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    let data = testkit::shared_data();
     let set = daemon::bench::sets::synth_set(&data);
     let steady = daemon::bench::sets::steady_songs(&set);
     // A 4/4 song in the middle of the tempo range; every rendered set has some.
@@ -22,7 +20,10 @@ fn key_poses_cued_on_the_next_bar_land_on_downbeats() {
         .iter()
         .find(|(bpm, i)| i.meter == Some(4) && (100.0..=140.0).contains(bpm))
     else {
-        eprintln!("skipping: no rendered 4/4 song under {}", data.display());
+        testkit::skip(format_args!(
+            "no rendered 4/4 song under {} (the shared data sets)",
+            data.display()
+        ));
         return;
     };
     let downbeats = item

@@ -61,10 +61,7 @@ fn serve() -> String {
 
 #[test]
 fn browser_runs_webgl2_offline_and_screenshots() {
-    if browser::chromium_path().is_none() {
-        eprintln!(
-            "SKIP: no chromium found (install chromium-headless-shell or set DANCED_CHROMIUM)"
-        );
+    if !browser::require_chromium() {
         return;
     }
     let url = serve();

@@ -94,7 +94,9 @@ fn a_64_channel_alsa_device_is_captured_without_a_panic() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     if err.contains("no audio input matches") || err.contains("no audio inputs") {
-        eprintln!("skipping: this ALSA build does not list the test PCM ({err})");
+        testkit::skip(format_args!(
+            "this ALSA build does not list the test PCM ({err})"
+        ));
         return;
     }
     assert!(out.status.success(), "{err}");
@@ -131,7 +133,10 @@ fn start_pulse(sink: &str) {
 #[test]
 fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     if pactl(&["info"]).is_none() {
-        eprintln!("skipping: no PulseAudio server (`.ci/run` starts one; see its comments)");
+        testkit::skip(
+            "no PulseAudio server (apt-get install pulseaudio pulseaudio-utils \
+             libasound2-plugins; `.ci/run` starts one, see its comments)",
+        );
         return;
     }
     let sink = "danced_clicks";
@@ -165,7 +170,13 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
         .stderr(std::fs::File::create(dir.join("stderr.txt")).unwrap())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_secs(1));
+    // Until danced records from the server (its ALSA plug-in stream is a source output).
+    let recording =
+        || pactl(&["list", "short", "source-outputs"]).is_some_and(|s| !s.trim().is_empty());
+    assert!(
+        testkit::wait_until(Duration::from_secs(30), recording),
+        "danced never started recording from PulseAudio"
+    );
     // Returns when the playback started and when it was over.
     let play = || {
         let from = Instant::now();
@@ -180,11 +191,26 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     let (played, _) = play();
     // Device loss: the server goes away mid-run and comes back a second later.
     let _ = Command::new("pulseaudio").arg("-k").status();
+    // (`pulseaudio --check`, not a client, which might autospawn a server.)
+    let server_up = || {
+        Command::new("pulseaudio")
+            .arg("--check")
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    assert!(
+        testkit::wait_until(Duration::from_secs(30), || !server_up()),
+        "the PulseAudio server did not go away"
+    );
     let killed = Instant::now();
     std::thread::sleep(Duration::from_secs(1));
     start_pulse(sink);
     let restarted = Instant::now();
-    std::thread::sleep(Duration::from_millis(1500));
+    // Until danced records from the new server.
+    assert!(
+        testkit::wait_until(Duration::from_secs(30), recording),
+        "danced never recorded from the restarted server"
+    );
     let (replayed, replay_over) = play();
     std::thread::sleep(Duration::from_millis(500));
     let _ = Command::new("kill")
@@ -276,8 +302,9 @@ fn paced_capture_hears_the_clicks_and_survives_a_server_restart() {
     let outage_s = s["silence_frames"].as_f64().unwrap() / 48_000.0 + 0.25;
     eprintln!(
         "server down {:.2} s; audio missing {outage_s:.2} s, so back {:.2} s after the server; \
-         first onset {back:?} after the restart (playback resumed 1.5 s after it)",
+         first onset {back:?} after the restart (playback resumed {:.2} s after it)",
         (restarted - killed).as_secs_f64(),
-        outage_s - (restarted - killed).as_secs_f64()
+        outage_s - (restarted - killed).as_secs_f64(),
+        (replayed - restarted).as_secs_f64()
     );
 }

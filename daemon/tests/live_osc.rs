@@ -5,6 +5,8 @@
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use glam::Quat;
@@ -12,7 +14,9 @@ use model::rig::{JOINT_COUNT, Joint, Pose, to_unity_rotation};
 use rosc::{OscMessage, OscPacket, OscTime, OscType};
 
 mod common;
-use common::{click_track, danced, receive, scratch, write_wav};
+use common::{
+    click_track, danced, receive, receive_watched, receive_while, scratch, shared_data, write_wav,
+};
 
 const RATE: u32 = 44_100;
 const BPM: f64 = 120.0;
@@ -101,6 +105,22 @@ fn native_frames(packets: &[(Instant, Vec<u8>)]) -> (Vec<Frame>, Vec<OscMessage>
     (frames, events)
 }
 
+/// The audio time of the newest native frame among `packets` (0 before the first).
+fn latest_audio_time(packets: &[(Instant, Vec<u8>)]) -> f32 {
+    packets
+        .iter()
+        .rev()
+        .find_map(|(_, bytes)| {
+            let (_, packet) = rosc::decoder::decode_udp(bytes).ok()?;
+            let mut msgs = Vec::new();
+            messages(&packet, None, &mut msgs);
+            msgs.iter()
+                .find(|(_, m)| m.addr == "/danced/frame")
+                .map(|(_, m)| floats(m)[0])
+        })
+        .unwrap_or(0.0)
+}
+
 fn send(socket: &UdpSocket, port: u16, addr: &str, args: Vec<OscType>) {
     let bytes = rosc::encoder::encode(&OscPacket::Message(OscMessage {
         addr: addr.into(),
@@ -142,7 +162,7 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
     let control_port = free_port();
     let stats = dir.join("stats.json");
     let speed = 2.0;
-    let child = danced()
+    let mut child = danced()
         .args(["run", "--input"])
         .arg(&wav)
         .args(["--speed", "2", "--duration", "12", "--temperature", "0.5"])
@@ -154,13 +174,21 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let started = Instant::now();
-    let until = started + Duration::from_secs(9);
-    let (native_rx, vmc_rx) = (receive(native, until), receive(vmc, until));
+    // Both streams are received until danced has ended, however long it took to start.
+    let listening = Arc::new(AtomicBool::new(true));
+    let (inbox, native_rx) = receive_watched(native, listening.clone());
+    let vmc_rx = receive_while(vmc, listening.clone());
 
-    // At audio ≈ 6 s: garbage, an unknown address and wrong arguments (all ignored and
-    // counted), then a key pose on the next beat.
-    std::thread::sleep(Duration::from_secs_f64(3.0));
+    // At audio ≈ 6 s (once a frame that late has arrived): garbage, an unknown address and
+    // wrong arguments (all ignored and counted), then a key pose on the next beat.
+    // (A danced that ended early stops the wait; its exit status is checked below.)
+    let heard = || latest_audio_time(&inbox.lock().unwrap());
+    assert!(
+        testkit::wait_until(Duration::from_secs(60), || heard() >= 6.0
+            || child.try_wait().unwrap().is_some()),
+        "no frame reached audio 6 s (the last at {} s)",
+        heard()
+    );
     let control = UdpSocket::bind("127.0.0.1:0").unwrap();
     let _ = control.send_to(b"\x00\x01garbage", ("127.0.0.1", control_port));
     send(
@@ -193,6 +221,7 @@ fn run_streams_native_and_vmc_and_obeys_osc_control() {
         ],
     );
     let out = wait(child, Duration::from_secs(30));
+    listening.store(false, Ordering::Relaxed);
     assert!(
         out.status.success(),
         "{}",
@@ -455,12 +484,7 @@ fn temperature_over_osc_changes_the_diversity_of_the_motion() {
 
 #[test]
 fn oscdump_receives_the_native_and_vmc_streams() {
-    if std::process::Command::new("oscdump")
-        .arg("-h")
-        .output()
-        .is_err()
-    {
-        eprintln!("skipping: oscdump (Debian package liblo-tools) is not installed");
+    if !testkit::require_program("oscdump", "apt-get install liblo-tools") {
         return;
     }
     let dir = scratch("live-oscdump");
@@ -478,7 +502,23 @@ fn oscdump_receives_the_native_and_vmc_streams() {
             .unwrap()
     };
     let (d1, d2) = (dump(p1), dump(p2));
-    std::thread::sleep(Duration::from_millis(300));
+    // oscdump prints nothing when it is ready, so probe until it has written a marker (and
+    // after the run, until a last marker shows that it has written everything before it).
+    let probe = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let marked = |port: u16, marker: &str| {
+        testkit::wait_until(Duration::from_secs(20), || {
+            send(&probe, port, marker, Vec::new());
+            std::thread::sleep(Duration::from_millis(50));
+            std::fs::read_to_string(dir.join(format!("{port}.txt")))
+                .is_ok_and(|text| text.contains(marker))
+        })
+    };
+    for port in [p1, p2] {
+        assert!(
+            marked(port, "/probe"),
+            "oscdump on port {port} never answered"
+        );
+    }
     let out = danced()
         .args(["run", "--input"])
         .arg(&wav)
@@ -492,7 +532,12 @@ fn oscdump_receives_the_native_and_vmc_streams() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    std::thread::sleep(Duration::from_millis(200));
+    for port in [p1, p2] {
+        assert!(
+            marked(port, "/done"),
+            "oscdump on port {port} stopped writing"
+        );
+    }
     let text = |mut c: Child, port: u16| {
         let _ = c.kill();
         let _ = c.wait();
@@ -533,7 +578,12 @@ fn oscdump_receives_the_native_and_vmc_streams() {
 
 #[test]
 fn beats_of_a_recorded_song_arrive_near_the_reference_beats() {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
+    let (Some(data), Some(_)) = (
+        shared_data("tang2018/DANCE_C_4/audio.mp3"),
+        shared_data("tang2018-beats/DANCE_C_4.beats"),
+    ) else {
+        return;
+    };
     let (song, reference) = (
         data.join("tang2018/DANCE_C_4/audio.mp3"),
         data.join("tang2018-beats/DANCE_C_4.beats"),

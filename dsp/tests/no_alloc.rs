@@ -1,40 +1,13 @@
-//! The per-block path allocates nothing: a counting global allocator watches `Analyzer::process`
-//! over minutes of audio at every supported kind of input.
+//! The per-block path allocates nothing: the workspace's counting global allocator
+//! (`counting-alloc`, the one `danced` runs with) watches `Analyzer::process` over minutes of
+//! audio at every supported kind of input, counting this thread's allocator calls while the
+//! analysis runs.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicUsize, Ordering};
-
+use counting_alloc::{CountingAllocator, RtThread, count_here};
 use dsp::{
     AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, FeatureFrame, HopFrame,
     OnsetEvent,
 };
-
-struct CountingAllocator;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-}
-
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.with(|c| c.get()) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.with(|c| c.get()) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
@@ -68,7 +41,7 @@ fn count_allocations(
     channels: u16,
     block: usize,
     tracker: BeatTrackerKind,
-) -> (usize, Tally) {
+) -> (u64, Tally) {
     let mut analyzer = Analyzer::new(AnalyzerConfig {
         sample_rate: rate,
         channels,
@@ -93,24 +66,22 @@ fn count_allocations(
         })
         .collect();
     let mut tally = Tally::default();
-    ALLOCATIONS.store(0, Ordering::SeqCst);
-    COUNTING.with(|c| c.set(true));
-    for chunk in signal.chunks(block * channels as usize) {
-        analyzer.process(chunk, &mut tally);
-    }
-    COUNTING.with(|c| c.set(false));
-    (ALLOCATIONS.load(Ordering::SeqCst), tally)
+    let ((), allocations) = count_here(RtThread::Analysis, || {
+        for chunk in signal.chunks(block * channels as usize) {
+            analyzer.process(chunk, &mut tally);
+        }
+    });
+    (allocations, tally)
 }
 
 #[test]
 fn process_never_allocates() {
     // The counter itself must see an allocation, or a zero below would prove nothing.
-    ALLOCATIONS.store(0, Ordering::SeqCst);
-    COUNTING.with(|c| c.set(true));
-    let probe = std::hint::black_box(Box::new([0u8; 64]));
-    COUNTING.with(|c| c.set(false));
+    let (probe, allocations) = count_here(RtThread::Analysis, || {
+        std::hint::black_box(Box::new([0u8; 64]))
+    });
     drop(probe);
-    assert_eq!(ALLOCATIONS.load(Ordering::SeqCst), 1);
+    assert_eq!(allocations, 1);
 
     let mut kinds = vec![BeatTrackerKind::Native];
     if cfg!(feature = "aubio") {

@@ -335,11 +335,10 @@ mod tests {
 
     #[test]
     fn shared_data_set_loads_when_present() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tang2018");
-        if !root.is_dir() {
-            eprintln!("skipping: {} not found", root.display());
+        let Some(data) = testkit::require_shared("tang2018") else {
             return;
-        }
+        };
+        let root = data.join("tang2018");
         let dirs = dance_dirs(&root).unwrap();
         assert_eq!(dirs.len(), 43);
         let mut minutes = 0.0;

@@ -898,7 +898,7 @@ pub fn fit_dance(dance: &TangDance) -> Result<TangFit, FitError> {
 mod tests {
     use super::*;
     use crate::tang2018::{dance_dirs, load_dance};
-    use std::path::{Path, PathBuf};
+    use std::path::PathBuf;
     use std::time::Instant;
 
     fn truth_lengths() -> Lengths {
@@ -1259,14 +1259,10 @@ mod tests {
         }
     }
 
+    /// The shared tang2018 data set, or `None` when absent (the test skips, see `testkit`).
+    #[track_caller]
     fn data_root() -> Option<PathBuf> {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/tang2018");
-        if root.is_dir() {
-            Some(root)
-        } else {
-            eprintln!("skipping: {} not found", root.display());
-            None
-        }
+        testkit::require_shared("tang2018").map(|data| data.join("tang2018"))
     }
 
     /// Median over frames of `f`, for convention checks on fitted dances.

@@ -739,19 +739,10 @@ mod tests {
         }
     }
 
-    /// `../shared/data` beside the repository.
-    fn shared_data() -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
-    }
-
+    /// The shared data's madmom samples, or `None` when absent (the test skips, see `testkit`).
+    #[track_caller]
     fn madmom_dir() -> Option<PathBuf> {
-        let dir = shared_data().join("madmom-tests");
-        if dir.is_dir() {
-            Some(dir.to_path_buf())
-        } else {
-            eprintln!("skipping: {} not found", dir.display());
-            None
-        }
+        testkit::require_shared("madmom-tests").map(|data| data.join("madmom-tests"))
     }
 
     fn timed_decode(path: &Path) -> DecodedAudio {
@@ -828,15 +819,20 @@ mod tests {
         );
     }
 
-    /// DANCE_C_1 has no audio in the shared copy of the data set; take the first that does.
+    /// DANCE_C_1 has no audio in the shared copy of the data set; take the first that does (or
+    /// `None`: the test skips, see `testkit`).
+    #[track_caller]
     fn tang2018_mp3_path() -> Option<PathBuf> {
-        let root = shared_data().join("tang2018");
+        let root = testkit::shared_data().join("tang2018");
         let found = ["DANCE_C_1", "DANCE_C_2", "DANCE_C_4", "DANCE_R_2"]
             .iter()
             .map(|d| root.join(d).join("audio.mp3"))
             .find(|p| p.is_file());
         if found.is_none() {
-            eprintln!("skipping: no tang2018 mp3 under {}", root.display());
+            testkit::skip(format_args!(
+                "no tang2018 mp3 under {} (the shared data sets)",
+                root.display()
+            ));
         }
         found
     }

@@ -2,65 +2,26 @@
 //! event to every layout (native, VMC whole and split, VRChat) performs no heap allocation,
 //! reallocation or free on the sending thread.
 //!
-//! A counting global allocator counts only on the current thread and only while a thread-local
-//! flag is set, so the test harness and the receiving side do not disturb the count.
+//! The workspace's counting global allocator (`counting-alloc`, the one `danced` runs with)
+//! counts only on the current thread and only while it runs counted code, so the test harness,
+//! the other tests and the receiving side do not disturb the count.
 
+use counting_alloc::{CountingAllocator, RtThread, count_here};
 use glam::{Quat, Vec3};
 use protocols::{
     AnalysisEvent, BodyFrame, BoneSample, NativeEncoder, OscOutput, OscTarget, TargetKind,
     VmcEncoder, VrchatEncoder,
 };
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::net::UdpSocket;
 use std::time::{Duration, UNIX_EPOCH};
-
-/// The system allocator, counting calls made on a thread while its flag is set.
-struct CountingAllocator;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static CALLS: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note_call() {
-    // `try_with`: the allocator may run while thread-locals are being torn down.
-    if COUNTING.try_with(Cell::get).unwrap_or(false) {
-        let _ = CALLS.try_with(|c| c.set(c.get() + 1));
-    }
-}
-
-// SAFETY: every call is forwarded unchanged to the system allocator; counting only touches
-// const-initialised thread-locals, which never allocate.
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note_call();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note_call();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        note_call();
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note_call();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
-/// Allocator calls made on this thread by `f`.
+/// Allocator calls (allocations, reallocations and frees) made on this thread by `f`, counted
+/// as the sender's real-time code.
 fn counted<R>(f: impl FnOnce() -> R) -> (R, u64) {
-    CALLS.with(|c| c.set(0));
-    COUNTING.with(|c| c.set(true));
-    let r = f();
-    COUNTING.with(|c| c.set(false));
-    (r, CALLS.with(Cell::get))
+    count_here(RtThread::Sender, f)
 }
 
 const BONES: [&str; 22] = [
@@ -217,10 +178,15 @@ fn warm_sender_allocates_nothing_for_any_layout() {
             *r += drain(s, &mut buf);
         }
     }
-    std::thread::sleep(Duration::from_millis(50));
-    for (r, s) in received.iter_mut().zip(&sockets) {
-        *r += drain(s, &mut buf);
-    }
+    // Loopback delivers at once, but the last datagrams may still be on their way: wait (with
+    // a generous deadline) until as many have arrived as were sent, then check them exactly.
+    let sent = (whole.packets_sent() + split.packets_sent()) as usize;
+    testkit::wait_until(Duration::from_secs(10), || {
+        for (r, s) in received.iter_mut().zip(&sockets) {
+            *r += drain(s, &mut buf);
+        }
+        received.iter().sum::<usize>() >= sent
+    });
     println!(
         "allocator calls: {total_calls} over {FRAMES} frames ({:.1} per frame)",
         total_calls as f64 / FRAMES as f64

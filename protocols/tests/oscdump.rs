@@ -78,8 +78,7 @@ fn close(a: &[f32], b: &[f32]) -> bool {
 
 #[test]
 fn oscdump_reads_native_and_vmc_bundles() {
-    if Command::new("oscdump").arg("-h").output().is_err() {
-        println!("oscdump not installed (apt install liblo-tools): skipping");
+    if !testkit::require_program("oscdump", "apt-get install liblo-tools") {
         return;
     }
     let start = Instant::now();

@@ -1,7 +1,7 @@
 //! End-to-end analysis: audio in (synthesised, or recorded from `../shared/data` when present),
 //! beats, onsets and feature frames out, scored against known answers.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use daemon::demo_track::{DEMO_RATE, demo_track};
 use dsp::feature::{FEATURE_DIM, FeatureLayout};
@@ -16,17 +16,11 @@ fn options(model_rate: Option<f64>) -> AnalyzeOptions {
     }
 }
 
-fn shared_data() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!(
-            "skipping: {} not found (tests that need the shared data sets skip cleanly)",
-            p.display()
-        );
-        None
-    }
+/// `shared/data` beside the repository when `needed` is in it; else the test skips (see
+/// `testkit`).
+#[track_caller]
+fn shared_data(needed: &str) -> Option<PathBuf> {
+    testkit::require_shared(needed)
 }
 
 #[test]
@@ -158,7 +152,9 @@ fn the_relative_level_tells_a_breakdown_from_a_quietly_mastered_song() {
 
 #[test]
 fn hand_annotated_onsets_are_found() {
-    let Some(data) = shared_data() else { return };
+    let Some(data) = shared_data("madmom-tests") else {
+        return;
+    };
     let dir = data.join("madmom-tests");
     let a = analyze_file(&dir.join("sample.wav"), options(None), &mut |_, _| {}).unwrap();
     let reference = offline::files::read_times(&dir.join("sample.onsets")).unwrap();
@@ -173,7 +169,9 @@ fn hand_annotated_onsets_are_found() {
 
 #[test]
 fn synthetic_songs_with_exact_beats_are_tracked() {
-    let Some(data) = shared_data() else { return };
+    let Some(data) = shared_data("synth-beats") else {
+        return;
+    };
     // A spread of styles: a regression guard, not the benchmark (`danced bench beats` is).
     let songs = [
         "synth_004_115bpm_4-4_chacha",

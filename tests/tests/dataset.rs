@@ -1,6 +1,6 @@
 //! Training data: a tang2018 dance becomes aligned motion and music features.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use dsp::feature::FeatureLayout;
 use offline::dataset::{build_dance, is_validation, write_dataset};
@@ -17,16 +17,12 @@ fn split_is_deterministic_and_stratified_by_style() {
     assert_eq!(val, [&names[2], &names[8]]);
 }
 
-/// The shared data folder and its dance DANCE_W_22 (a waltz), or None (said on stderr) when
-/// the data is absent.
+/// The shared data folder and its dance DANCE_W_22 (a waltz), or None when the data is absent
+/// (the test skips, see `testkit`).
+#[track_caller]
 fn waltz_22() -> Option<(PathBuf, model::tang2018::TangDance)> {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    let dir = data.join("tang2018/DANCE_W_22");
-    if !dir.is_dir() {
-        eprintln!("skipping: {} not found", dir.display());
-        return None;
-    }
-    let dance = model::tang2018::load_dance(&dir).unwrap();
+    let data = testkit::require_shared("tang2018/DANCE_W_22")?;
+    let dance = model::tang2018::load_dance(&data.join("tang2018/DANCE_W_22")).unwrap();
     Some((data, dance))
 }
 

@@ -410,7 +410,14 @@ fn a_stalled_sender_is_counted_and_its_full_pose_queue_too() {
         &ctx,
     )
     .unwrap();
-    std::thread::sleep(Duration::from_millis(2600));
+    // Until the sender is back from its stall and has rejoined its grid, with a generous
+    // deadline (the stall alone takes 2 s).
+    let stats = &ctx.stats;
+    testkit::wait_until(Duration::from_secs(30), || {
+        stats.poses_dropped.load(Ordering::Relaxed) > 0
+            && stats.sender_stalls.load(Ordering::Relaxed) >= 1
+            && !rx.is_empty()
+    });
     let (report, _) = pipeline.stop().unwrap();
     ctx.stop.store(true, Ordering::Relaxed);
     replay.join().unwrap();

@@ -52,6 +52,19 @@ pub fn chromium_path() -> Option<PathBuf> {
         .find(|p| p.exists())
 }
 
+/// Whether a Chromium is there to drive; otherwise the test skips (a `SKIP` line, or a failure
+/// under `DANCED_REQUIRE_ALL`; see `testkit`).
+#[track_caller]
+pub fn require_chromium() -> bool {
+    if chromium_path().is_some() {
+        return true;
+    }
+    testkit::skip(
+        "no Chromium in /usr/bin (apt-get install chromium-headless-shell, or set DANCED_CHROMIUM)",
+    );
+    false
+}
+
 /// The last lines chromium wrote to stderr, for error messages.
 type Log = Arc<Mutex<VecDeque<String>>>;
 

@@ -4,6 +4,8 @@
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 pub fn danced() -> Command {
@@ -19,15 +21,11 @@ pub fn succeed(cmd: &mut Command) -> (String, String) {
     (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
 }
 
-/// `../shared/data` beside the repository, or `None` (with a message) when `needed` is absent.
+/// `shared/data` beside the repository, or `None` when `needed` is absent: the test skips (a
+/// `SKIP` line, or a failure under `DANCED_REQUIRE_ALL`; see `testkit`).
+#[track_caller]
 pub fn shared_data(needed: &str) -> Option<PathBuf> {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    if data.join(needed).is_dir() {
-        Some(data)
-    } else {
-        eprintln!("skipping: {} not found", data.join(needed).display());
-        None
-    }
+    testkit::require_shared(needed)
 }
 
 pub fn scratch(name: &str) -> PathBuf {
@@ -63,39 +61,62 @@ pub fn click_track(seconds: f64, bpm: f64, first_s: f64, rate: u32) -> (Vec<f32>
     daemon::demo_track::click_track(seconds, bpm, first_s, rate)
 }
 
+/// Datagrams with their arrival times.
+pub type Packets = Vec<(Instant, Vec<u8>)>;
+
+/// Datagrams received so far, as the receiving thread collects them (for a test that waits for
+/// one to come); the thread takes them back when it ends.
+pub type Inbox = Arc<Mutex<Packets>>;
+
 /// Collects every datagram arriving on a socket until `until`, with its arrival time.
-pub fn receive(
-    socket: UdpSocket,
-    until: Instant,
-) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
-    receive_for(socket, move || Instant::now() < until)
+pub fn receive(socket: UdpSocket, until: Instant) -> std::thread::JoinHandle<Packets> {
+    receive_for(socket, move || Instant::now() < until, Inbox::default())
 }
 
 /// Collects every datagram arriving on a socket while `listening` holds, with its arrival time.
 pub fn receive_while(
     socket: UdpSocket,
-    listening: std::sync::Arc<std::sync::atomic::AtomicBool>,
-) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
-    receive_for(socket, move || {
-        listening.load(std::sync::atomic::Ordering::Relaxed)
-    })
+    listening: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<Packets> {
+    receive_for(
+        socket,
+        move || listening.load(Ordering::Relaxed),
+        Inbox::default(),
+    )
+}
+
+/// [`receive_while`], also sharing the datagrams as they arrive.
+pub fn receive_watched(
+    socket: UdpSocket,
+    listening: Arc<AtomicBool>,
+) -> (Inbox, std::thread::JoinHandle<Packets>) {
+    let inbox = Inbox::default();
+    let handle = receive_for(
+        socket,
+        move || listening.load(Ordering::Relaxed),
+        inbox.clone(),
+    );
+    (inbox, handle)
 }
 
 fn receive_for(
     socket: UdpSocket,
     go_on: impl Fn() -> bool + Send + 'static,
-) -> std::thread::JoinHandle<Vec<(Instant, Vec<u8>)>> {
+    inbox: Inbox,
+) -> std::thread::JoinHandle<Packets> {
     std::thread::spawn(move || {
         socket
             .set_read_timeout(Some(Duration::from_millis(50)))
             .unwrap();
-        let mut got = Vec::new();
         let mut buf = vec![0u8; 65_536];
         while go_on() {
             if let Ok(n) = socket.recv(&mut buf) {
-                got.push((Instant::now(), buf[..n].to_vec()));
+                inbox
+                    .lock()
+                    .unwrap()
+                    .push((Instant::now(), buf[..n].to_vec()));
             }
         }
-        got
+        std::mem::take(&mut *inbox.lock().unwrap())
     })
 }

@@ -1,4 +1,4 @@
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use glam::{Mat3, Quat, Vec3};
 use proptest::prelude::*;
@@ -21,14 +21,9 @@ fn fk(skeleton: &Skeleton, pose: &Pose) -> ([Vec3; JOINT_COUNT], [Quat; JOINT_CO
     (p, r)
 }
 
+/// The shared Bandai Namco BVH files, when present.
 fn bandai_dir() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/bandai-namco-1");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipping: {} is absent", dir.display());
-        None
-    }
+    Some(testkit::shared_data().join("bandai-namco-1")).filter(|dir| dir.is_dir())
 }
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -1003,7 +998,10 @@ fn header_counts(text: &str) -> (usize, usize) {
 
 #[test]
 fn bandai_namco_files_parse_and_retarget() {
-    let Some(dir) = bandai_dir() else { return };
+    let Some(dir) = testkit::require_shared("bandai-namco-1").map(|d| d.join("bandai-namco-1"))
+    else {
+        return;
+    };
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().path())
