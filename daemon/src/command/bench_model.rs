@@ -114,12 +114,19 @@ pub fn bench_model(args: &BenchModelArgs) -> Result<()> {
     let times = time_frames(&mut dancer, &song, args.frames.max(1), args.temperature);
     let q = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
     println!(
-        "model {:?}\ntrained by: {}\n{} frames after 200 warm-up: p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per frame (one thread); {} held frames",
+        "model {:?}\ntrained by: {}\ntrained on: {} ({} steps; data {})\n{} frames after 200 warm-up: p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per frame (one thread); {} held frames",
         model.config,
         if model.training.recipe.is_empty() {
             "(not recorded)"
         } else {
             &model.training.recipe
+        },
+        model.training.data,
+        model.training.steps,
+        if model.training.data_hash.is_empty() {
+            "hash not recorded"
+        } else {
+            &model.training.data_hash
         },
         times.len(),
         q(0.5) / 1e3,
