@@ -17,10 +17,12 @@ use offline::dataset::BuiltDance;
 
 use crate::net::{FreeRun, InputPath};
 use crate::recipe::{
-    DancerRecipe, DancerStage, SHIPPED_DANCER_RECIPE, SHIPPED_DANCER_RECIPE_PATH, TrainOnly,
+    DancerRecipe, DancerStage, RolloutSettings, SHIPPED_DANCER_RECIPE, SHIPPED_DANCER_RECIPE_PATH,
+    TrainOnly,
 };
 use crate::train::{
-    Batch, Corpus, CriticTerm, DanceInput, KEY_HORIZON_MIN, KeyRollout, Trainer, add_key_to_flow,
+    Batch, Corpus, CriticTerm, DanceInput, KEY_HORIZON_MIN, KeyRollout, StepLoss, Trainer,
+    add_key_to_flow,
 };
 
 /// Options of `danced-train dancer`.
@@ -228,6 +230,160 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
+/// The model a stage starts from: the one the stage before left, its flow given the key pose
+/// if the stage asks for it, or (`start` None) a new network normalised to `train_pairs`.
+fn stage_model(
+    stage: &DancerStage,
+    start: Option<NeuralModel>,
+    train_pairs: &[DanceInput<'_>],
+) -> Result<NeuralModel> {
+    if let Some(mut model) = start {
+        if stage.key_to_flow && !model.config.key_to_flow {
+            add_key_to_flow(&mut model).context("giving the flow the key pose")?;
+            eprintln!(
+                "the flow now also reads the key pose (new weights zero: the same dancer until trained)"
+            );
+        }
+        return Ok(model);
+    }
+    let config = NetConfig {
+        key_to_flow: stage.key_to_flow,
+        ..NetConfig::default()
+    };
+    let mut m = NeuralModel {
+        config,
+        tensors: init_net(&config, stage.seed),
+        training: TrainingSummary::default(),
+    };
+    let motion: Vec<_> = train_pairs
+        .iter()
+        .flat_map(|p| p.0.iter().copied())
+        .collect();
+    let music: Vec<_> = train_pairs
+        .iter()
+        .flat_map(|p| p.1.iter().copied())
+        .collect();
+    m.set_normalizer(&Normalizer::fit(&motion, &music));
+    Ok(m)
+}
+
+/// The rollouts of one step as `r` sets them: from the token before the first full window,
+/// towards a key pose due 12 frames or more later (or, with no key weight, with no key), the
+/// draws made from `rng` in the order training has always made them.
+fn stage_rollout(
+    r: &RolloutSettings,
+    stage: &DancerStage,
+    window: usize,
+    corpus: &Corpus,
+    rng: &mut Rng,
+) -> KeyRollout {
+    // A full window of past before the announcement, as the live dancer has.
+    let at = window - 1;
+    let longest = r.horizon.min(stage.sequence.saturating_sub(at + 1));
+    let horizon = KEY_HORIZON_MIN + rng.below(longest.saturating_sub(KEY_HORIZON_MIN) + 1);
+    KeyRollout {
+        batch: if r.key_weight > 0.0 {
+            corpus.rollout_batch(rng, r.sequences, at, horizon, r.foreign)
+        } else {
+            corpus.free_rollout_batch(rng, r.sequences)
+        },
+        run: FreeRun {
+            at,
+            horizon,
+            temperature: r.temperature,
+            backprop_steps: r.backprop_steps,
+            approach: r.approach,
+        },
+        weight: r.key_weight as f32,
+        critic: r.critic.as_ref().map(|c| CriticTerm {
+            weight: c.weight as f32,
+            floor: c.floor.map_or(f32::MIN, |f| f as f32),
+        }),
+        noise_seed: rng.next_u64(),
+        key_cm: r.key_cm.map(|c| c as f32),
+        kinetic: r.kinetic as f32,
+    }
+}
+
+/// The running figures of a stage's progress lines.
+struct StageFigures {
+    loss: f64,
+    key_error: f64,
+    key_error_cm: f64,
+    keyless_nll: f64,
+    kinetic_mismatch: f64,
+    skipped_rollouts: u64,
+    exploded_sequences: u64,
+    gradient_skips: u64,
+}
+
+impl StageFigures {
+    fn new() -> Self {
+        Self {
+            loss: f64::NAN,
+            key_error: f64::NAN,
+            key_error_cm: f64::NAN,
+            keyless_nll: f64::NAN,
+            kinetic_mismatch: f64::NAN,
+            skipped_rollouts: 0,
+            exploded_sequences: 0,
+            gradient_skips: 0,
+        }
+    }
+
+    /// Takes in one step's scores (`rollout`: whether the step ran rollouts).
+    fn add(&mut self, scored: &StepLoss, rollout: bool) {
+        self.skipped_rollouts += u64::from(rollout && scored.key_error.is_none());
+        self.exploded_sequences += scored.exploded_sequences as u64;
+        self.gradient_skips += u64::from(scored.gradient_not_finite);
+        let smooth = |mean: &mut f64, x: Option<f32>| {
+            if let Some(x) = x {
+                *mean = running_mean(*mean, f64::from(x));
+            }
+        };
+        smooth(&mut self.key_error, scored.key_error);
+        smooth(&mut self.key_error_cm, scored.key_error_cm);
+        smooth(&mut self.keyless_nll, scored.keyless_nll);
+        smooth(&mut self.kinetic_mismatch, scored.kinetic_mismatch);
+        let loss = f64::from(scored.nll);
+        if loss.is_finite() {
+            self.loss = running_mean(self.loss, loss);
+        }
+    }
+
+    /// The rollouts' figures for an epoch line (`rollouts`: whether the stage runs any).
+    fn rollout_line(&self, rollouts: bool) -> String {
+        let mut line = String::new();
+        if !self.key_error.is_nan() {
+            line += &format!(
+                ", key-pose rollout error {:.2} ({:.1} cm; {} rollouts broke or all exploded, not scored; {} exploded sequences left out of the others)",
+                self.key_error, self.key_error_cm, self.skipped_rollouts, self.exploded_sequences
+            );
+        } else if rollouts {
+            line += &format!(
+                ", rollouts: {} broke or all exploded, not scored; {} exploded sequences left out of the others",
+                self.skipped_rollouts, self.exploded_sequences
+            );
+        }
+        if !self.keyless_nll.is_nan() {
+            line += &format!(
+                ", the rollouts' key-hidden NLL under the frozen start {:.2}",
+                self.keyless_nll
+            );
+        }
+        if !self.kinetic_mismatch.is_nan() {
+            line += &format!(", their kinetic mismatch {:.3}", self.kinetic_mismatch);
+        }
+        if self.gradient_skips > 0 {
+            line += &format!(
+                ", {} updates skipped for a non-finite gradient",
+                self.gradient_skips
+            );
+        }
+        line
+    }
+}
+
 /// One stage: the model the stage before left (None: a new network), trained `steps` steps
 /// on `dances` and written to `--out`.
 fn train_stage(
@@ -246,38 +402,8 @@ fn train_stage(
         .map(|d| d.name.clone())
         .collect();
     let val_pairs = pairs(dances, true);
-    let (mut model, fresh) = match start {
-        Some(mut model) => {
-            if stage.key_to_flow && !model.config.key_to_flow {
-                add_key_to_flow(&mut model).context("giving the flow the key pose")?;
-                eprintln!(
-                    "the flow now also reads the key pose (new weights zero: the same dancer until trained)"
-                );
-            }
-            (model, false)
-        }
-        None => {
-            let config = NetConfig {
-                key_to_flow: stage.key_to_flow,
-                ..NetConfig::default()
-            };
-            let mut m = NeuralModel {
-                config,
-                tensors: init_net(&config, stage.seed),
-                training: TrainingSummary::default(),
-            };
-            let motion: Vec<_> = train_pairs
-                .iter()
-                .flat_map(|p| p.0.iter().copied())
-                .collect();
-            let music: Vec<_> = train_pairs
-                .iter()
-                .flat_map(|p| p.1.iter().copied())
-                .collect();
-            m.set_normalizer(&Normalizer::fit(&motion, &music));
-            (m, true)
-        }
-    };
+    let fresh = start.is_none();
+    let mut model = stage_model(stage, start, &train_pairs)?;
     let config = model.config;
     let norm = model.normalizer()?;
     let mut corpus = Corpus::new(&train_pairs, &norm, &config, stage.sequence);
@@ -360,14 +486,7 @@ fn train_stage(
     );
     let started = Instant::now();
     let mut step: u64 = 0;
-    let mut smoothed = f64::NAN;
-    let mut key_error = f64::NAN;
-    let mut key_error_cm = f64::NAN;
-    let mut keyless_nll = f64::NAN;
-    let mut kinetic_mismatch = f64::NAN;
-    let mut skipped_rollouts = 0u64;
-    let mut exploded_sequences = 0u64;
-    let mut gradient_skips = 0u64;
+    let mut figures = StageFigures::new();
     let mut bad_steps = 0;
     let mut last_val = if val.is_empty() {
         None
@@ -394,51 +513,11 @@ fn train_stage(
         let progress = step as f64 / steps.max(1) as f64;
         let lr = learning_rate(stage.lr, step, progress);
         let batch = corpus.random_batch(&mut rng, stage.batch, stage.key_drop);
-        let rollout = rollout_settings.map(|r| {
-            // A full window of past before the announcement, as the live dancer has.
-            let at = config.window - 1;
-            let longest = r.horizon.min(stage.sequence.saturating_sub(at + 1));
-            let horizon = KEY_HORIZON_MIN + rng.below(longest.saturating_sub(KEY_HORIZON_MIN) + 1);
-            KeyRollout {
-                batch: if r.key_weight > 0.0 {
-                    corpus.rollout_batch(&mut rng, r.sequences, at, horizon, r.foreign)
-                } else {
-                    corpus.free_rollout_batch(&mut rng, r.sequences)
-                },
-                run: FreeRun {
-                    at,
-                    horizon,
-                    temperature: r.temperature,
-                    backprop_steps: r.backprop_steps,
-                    approach: r.approach,
-                },
-                weight: r.key_weight as f32,
-                critic: r.critic.as_ref().map(|c| CriticTerm {
-                    weight: c.weight as f32,
-                    floor: c.floor.map_or(f32::MIN, |f| f as f32),
-                }),
-                noise_seed: rng.next_u64(),
-                key_cm: r.key_cm.map(|c| c as f32),
-                kinetic: r.kinetic as f32,
-            }
-        });
+        let rollout =
+            rollout_settings.map(|r| stage_rollout(r, stage, config.window, &corpus, &mut rng));
         let scored = trainer.step(&batch, rollout.as_ref(), lr);
         let loss = f64::from(scored.nll);
-        skipped_rollouts += u64::from(rollout.is_some() && scored.key_error.is_none());
-        exploded_sequences += scored.exploded_sequences as u64;
-        gradient_skips += u64::from(scored.gradient_not_finite);
-        if let Some(e) = scored.key_error {
-            key_error = running_mean(key_error, f64::from(e));
-        }
-        if let Some(e) = scored.key_error_cm {
-            key_error_cm = running_mean(key_error_cm, f64::from(e));
-        }
-        if let Some(e) = scored.keyless_nll {
-            keyless_nll = running_mean(keyless_nll, f64::from(e));
-        }
-        if let Some(e) = scored.kinetic_mismatch {
-            kinetic_mismatch = running_mean(kinetic_mismatch, f64::from(e));
-        }
+        figures.add(&scored, rollout.is_some());
         bad_steps = if loss.is_finite() { 0 } else { bad_steps + 1 };
         if bad_steps >= 20 {
             bail!(
@@ -451,37 +530,18 @@ fn train_stage(
         if !loss.is_finite() {
             continue;
         }
-        smoothed = running_mean(smoothed, loss);
         let secs = started.elapsed().as_secs_f64();
         if step.is_multiple_of(steps_per_epoch) {
             last_val = validate(&mut trainer)?;
             checkpoint(&mut trainer, step, last_val, secs)?;
-            let mut line = format!(
-                "{}: epoch {} (step {step}): loss {smoothed:.2}, validation NLL {} nats/frame",
+            let line = format!(
+                "{}: epoch {} (step {step}): loss {:.2}, validation NLL {} nats/frame{}",
                 stage.name,
                 step / steps_per_epoch,
+                figures.loss,
                 last_val.map_or("-".into(), |v| format!("{v:.2}")),
+                figures.rollout_line(rollout_settings.is_some()),
             );
-            if !key_error.is_nan() {
-                line += &format!(
-                    ", key-pose rollout error {key_error:.2} ({key_error_cm:.1} cm; {skipped_rollouts} rollouts broke or all exploded, not scored; {exploded_sequences} exploded sequences left out of the others)"
-                );
-            } else if rollout_settings.is_some() {
-                line += &format!(
-                    ", rollouts: {skipped_rollouts} broke or all exploded, not scored; {exploded_sequences} exploded sequences left out of the others"
-                );
-            }
-            if !keyless_nll.is_nan() {
-                line += &format!(
-                    ", the rollouts' key-hidden NLL under the frozen start {keyless_nll:.2}"
-                );
-            }
-            if !kinetic_mismatch.is_nan() {
-                line += &format!(", their kinetic mismatch {kinetic_mismatch:.3}");
-            }
-            if gradient_skips > 0 {
-                line += &format!(", {gradient_skips} updates skipped for a non-finite gradient");
-            }
             // A hidden bar (stderr not a terminal) swallows println: print the epoch anyway.
             if pb.is_hidden() {
                 eprintln!("{line}");
@@ -490,7 +550,8 @@ fn train_stage(
             }
         }
         pb.set_message(format!(
-            "loss {smoothed:.2} val {} lr {lr:.1e} {:.0} frames/s",
+            "loss {:.2} val {} lr {lr:.1e} {:.0} frames/s",
+            figures.loss,
             last_val.map_or("-".into(), |v| format!("{v:.2}")),
             (step as f64 * frames_per_step as f64) / secs.max(1e-9)
         ));
