@@ -6,7 +6,8 @@
 //! The network is trained with burn by `danced-train beats` on rendered songs with exact beats
 //! (`../shared/tools/synth_beats.py`, seeds from 1000 up); its weights ship inside the binary.
 
-use crate::net_file::{NetFileError, NetFileReader, NetFileWriter};
+use crate::DspError;
+use crate::net_file::{NetFileReader, NetFileWriter};
 use crate::onset::{FLUX_GROUPS, OnsetDetector};
 
 /// Inputs per hop: the onset flux of each group of bands relative to its recent mean,
@@ -121,7 +122,7 @@ impl BeatNetWeights {
     }
 
     /// Reads one network written by [`Self::write_to`]; checks every size and value.
-    fn read_from(r: &mut NetFileReader) -> Result<Self, NetFileError> {
+    fn read_from(r: &mut NetFileReader) -> Result<Self, DspError> {
         let inputs = r.u32()?;
         if inputs != BEAT_INPUT_DIM {
             return Err(r.malformed(format!(
@@ -192,7 +193,7 @@ impl BeatNetEnsemble {
     }
 
     /// Parses an ensemble written by [`Self::to_bytes`]; checks every size and value.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, NetFileError> {
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, DspError> {
         let mut r = NetFileReader::open(bytes, KIND, MAGIC, VERSION)?;
         let count = r.u32_in(1..=16, "network count")?;
         let mut nets = Vec::with_capacity(count);
@@ -384,25 +385,25 @@ mod tests {
         assert_eq!(BeatNetEnsemble::from_bytes(&bytes).unwrap(), w);
         assert!(matches!(
             BeatNetEnsemble::from_bytes(b"XXXX"),
-            Err(NetFileError::Magic { .. })
+            Err(DspError::NetFileMagic { .. })
         ));
         let mut v2 = bytes.clone();
         v2[4] = 9;
         assert!(matches!(
             BeatNetEnsemble::from_bytes(&v2),
-            Err(NetFileError::Version { found: 9, .. })
+            Err(DspError::NetFileVersion { found: 9, .. })
         ));
         let mut extra = bytes.clone();
         extra.push(0);
         assert!(matches!(
             BeatNetEnsemble::from_bytes(&extra),
-            Err(NetFileError::Malformed { .. })
+            Err(DspError::NetFileMalformed { .. })
         ));
         for cut in [6, 10, 20, bytes.len() / 2, bytes.len() - 1] {
             assert!(
                 matches!(
                     BeatNetEnsemble::from_bytes(&bytes[..cut]),
-                    Err(NetFileError::Malformed { .. })
+                    Err(DspError::NetFileMalformed { .. })
                 ),
                 "cut at {cut}"
             );
@@ -412,7 +413,7 @@ mod tests {
         nan[last..].copy_from_slice(&f32::NAN.to_le_bytes());
         assert!(matches!(
             BeatNetEnsemble::from_bytes(&nan),
-            Err(NetFileError::Malformed { .. })
+            Err(DspError::NetFileMalformed { .. })
         ));
     }
 

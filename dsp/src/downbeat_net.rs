@@ -11,9 +11,10 @@
 //! 1000 up), from the features the live analysis computed at the beats it tracked; its weights
 //! ship inside the binary.
 
+use crate::DspError;
 use crate::bar_class::CLASS_COUNT;
 use crate::bar_features::{BAR_FEATURE_DIM, TEMPO_FEATURE};
-use crate::net_file::{NetFileError, NetFileReader, NetFileWriter};
+use crate::net_file::{NetFileReader, NetFileWriter};
 
 /// Beats the network reads, the newest last: three bars of 4/4, four of 3/4.
 pub const BAR_WINDOW: usize = 12;
@@ -111,7 +112,7 @@ impl DownbeatNetEnsemble {
     }
 
     /// Parses an ensemble written by [`Self::to_bytes`]; checks every size and value.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, NetFileError> {
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, DspError> {
         let mut r = NetFileReader::open(bytes, KIND, MAGIC, VERSION)?;
         let prior = r.floats(CLASS_COUNT)?;
         if prior.iter().any(|&p| p <= 0.0) {
@@ -410,13 +411,13 @@ mod tests {
         assert_eq!(DownbeatNetEnsemble::from_bytes(&bytes).unwrap(), w);
         assert!(matches!(
             DownbeatNetEnsemble::from_bytes(b"DNBA\x01\0\0\0"),
-            Err(NetFileError::Magic { .. })
+            Err(DspError::NetFileMagic { .. })
         ));
         for cut in [6, 10, 40, bytes.len() / 2, bytes.len() - 1] {
             assert!(
                 matches!(
                     DownbeatNetEnsemble::from_bytes(&bytes[..cut]),
-                    Err(NetFileError::Malformed { .. })
+                    Err(DspError::NetFileMalformed { .. })
                 ),
                 "cut at {cut}"
             );
@@ -434,7 +435,7 @@ mod tests {
         wrong.nets[0].layers[0].bias.truncate(3);
         assert!(matches!(
             DownbeatNetEnsemble::from_bytes(&wrong.to_bytes()),
-            Err(NetFileError::Malformed { .. })
+            Err(DspError::NetFileMalformed { .. })
         ));
     }
 

@@ -1,4 +1,5 @@
-//! Errors raised when an analysis chain is configured.
+//! The crate's error type: errors raised when an analysis chain is configured or a weight file
+//! is read.
 
 /// Why an analysis component could not be built (the per-block path itself never fails).
 #[derive(Debug, thiserror::Error)]
@@ -30,4 +31,28 @@ pub enum DspError {
     /// value that is not a number or out of range, or a name the component does not have.
     #[error("{0}")]
     Tuning(String),
+    /// A weight file ([`crate::net_file`]) does not start with its kind's magic.
+    #[error("not a {kind} weight file (bad magic)")]
+    NetFileMagic {
+        /// What kind of file was expected.
+        kind: &'static str,
+    },
+    /// A weight file's layout version is not this build's.
+    #[error("{kind} weight file version {found} (this build reads {supported})")]
+    NetFileVersion {
+        /// What kind of file it is.
+        kind: &'static str,
+        /// The version in the file.
+        found: u32,
+        /// The version this build reads.
+        supported: u32,
+    },
+    /// A weight file is shorter or longer than its header says, or holds implausible values.
+    #[error("{kind} weight file is malformed: {reason}")]
+    NetFileMalformed {
+        /// What kind of file it is.
+        kind: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
 }

@@ -56,7 +56,6 @@ pub use hop::HopFrame;
 pub use level_follower::LevelFollower;
 pub use mel::MelFilterbank;
 pub use meter::MeterTracker;
-pub use net_file::NetFileError;
 pub use onset::{OnsetDetector, OnsetPeakPicker};
 pub use resample::StreamResampler;
 pub use stft::Stft;

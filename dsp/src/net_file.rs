@@ -2,34 +2,7 @@
 //! version, then `u32` sizes and `f32` values. Reading checks every size and value, so a
 //! truncated, padded or corrupted file is a named error and never a panic or a NaN.
 
-/// Why a weight file could not be read.
-#[derive(Debug, thiserror::Error)]
-pub enum NetFileError {
-    /// The bytes do not start with the file kind's magic.
-    #[error("not a {kind} weight file (bad magic)")]
-    Magic {
-        /// What kind of file was expected.
-        kind: &'static str,
-    },
-    /// The file's layout version is not this build's.
-    #[error("{kind} weight file version {found} (this build reads {supported})")]
-    Version {
-        /// What kind of file it is.
-        kind: &'static str,
-        /// The version in the file.
-        found: u32,
-        /// The version this build reads.
-        supported: u32,
-    },
-    /// The file is shorter or longer than its header says, or holds implausible values.
-    #[error("{kind} weight file is malformed: {reason}")]
-    Malformed {
-        /// What kind of file it is.
-        kind: &'static str,
-        /// What is wrong.
-        reason: String,
-    },
-}
+use crate::DspError;
 
 /// Reads a weight file front to back.
 pub struct NetFileReader<'a> {
@@ -45,14 +18,14 @@ impl<'a> NetFileReader<'a> {
         kind: &'static str,
         magic: &[u8; 4],
         version: u32,
-    ) -> Result<Self, NetFileError> {
+    ) -> Result<Self, DspError> {
         if bytes.len() < 4 || &bytes[..4] != magic {
-            return Err(NetFileError::Magic { kind });
+            return Err(DspError::NetFileMagic { kind });
         }
         let mut r = Self { bytes, at: 4, kind };
         let found = r.u32()? as u32;
         if found != version {
-            return Err(NetFileError::Version {
+            return Err(DspError::NetFileVersion {
                 kind,
                 found,
                 supported: version,
@@ -62,15 +35,15 @@ impl<'a> NetFileReader<'a> {
     }
 
     /// A malformed-file error naming `reason`.
-    pub fn malformed(&self, reason: impl Into<String>) -> NetFileError {
-        NetFileError::Malformed {
+    pub fn malformed(&self, reason: impl Into<String>) -> DspError {
+        DspError::NetFileMalformed {
             kind: self.kind,
             reason: reason.into(),
         }
     }
 
     /// The next `u32`.
-    pub fn u32(&mut self) -> Result<usize, NetFileError> {
+    pub fn u32(&mut self) -> Result<usize, DspError> {
         let s = self
             .bytes
             .get(self.at..self.at + 4)
@@ -84,7 +57,7 @@ impl<'a> NetFileReader<'a> {
         &mut self,
         range: std::ops::RangeInclusive<usize>,
         what: &str,
-    ) -> Result<usize, NetFileError> {
+    ) -> Result<usize, DspError> {
         let v = self.u32()?;
         if range.contains(&v) {
             Ok(v)
@@ -94,7 +67,7 @@ impl<'a> NetFileReader<'a> {
     }
 
     /// The next `n` values, all finite.
-    pub fn floats(&mut self, n: usize) -> Result<Vec<f32>, NetFileError> {
+    pub fn floats(&mut self, n: usize) -> Result<Vec<f32>, DspError> {
         let raw = self
             .bytes
             .get(self.at..self.at.saturating_add(n.saturating_mul(4)))
@@ -112,7 +85,7 @@ impl<'a> NetFileReader<'a> {
     }
 
     /// Checks that nothing follows what was read.
-    pub fn finish(self) -> Result<(), NetFileError> {
+    pub fn finish(self) -> Result<(), DspError> {
         if self.at == self.bytes.len() {
             Ok(())
         } else {

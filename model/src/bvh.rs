@@ -17,7 +17,7 @@
 //!
 //! [`Bvh::parse`] never panics: missing braces, unknown keywords, wrong channel counts,
 //! non-numeric or non-finite numbers, frames with too few or too many values and a frame count
-//! that does not match the header all give a [`BvhError::Syntax`] with the 1-based line number.
+//! that does not match the header all give a [`ModelError::BvhSyntax`] with the 1-based line number.
 //! The hierarchy is parsed without recursion, so deep nesting cannot overflow the stack, and
 //! [`Bvh::read`] refuses files over [`MAX_FILE_BYTES`].
 
@@ -28,10 +28,11 @@ mod tests;
 
 use std::fmt;
 use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::{DQuat, DVec3, Quat, Vec3};
-use thiserror::Error;
+
+use crate::ModelError;
 
 pub use export::{export, export_to_string};
 pub use retarget::{RetargetOptions, Retargeted, joint_for_name, retarget};
@@ -40,46 +41,6 @@ pub use retarget::{RetargetOptions, Retargeted, joint_for_name, retarget};
 pub const MAX_FILE_BYTES: u64 = 1 << 30;
 /// Most joints a hierarchy may have; real skeletons have tens to a few hundred.
 pub const MAX_JOINTS: usize = 10_000;
-
-/// Errors from reading, parsing, writing or retargeting BVH.
-#[derive(Debug, Error)]
-pub enum BvhError {
-    /// The text is not valid BVH; `line` is 1-based.
-    #[error("line {line}: {message}")]
-    Syntax {
-        /// 1-based line number where the problem was found.
-        line: usize,
-        /// What is wrong.
-        message: String,
-    },
-    /// A file could not be read or written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
-    },
-    /// A file's contents were rejected; names the file.
-    #[error("{}: {source}", path.display())]
-    InFile {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong with it.
-        source: Box<BvhError>,
-    },
-    /// A file over [`MAX_FILE_BYTES`].
-    #[error("{}: {bytes} bytes, more than the {MAX_FILE_BYTES} accepted", path.display())]
-    TooLarge {
-        /// The file.
-        path: PathBuf,
-        /// Its size.
-        bytes: u64,
-    },
-    /// A [`Bvh`] value that breaks the format's rules, or a file that cannot be put on our rig.
-    #[error("{0}")]
-    Invalid(String),
-}
 
 /// One animation channel of a joint.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -195,8 +156,8 @@ impl<'a> Lexer<'a> {
         }
     }
 
-    fn error(&self, message: impl Into<String>) -> BvhError {
-        BvhError::Syntax {
+    fn error(&self, message: impl Into<String>) -> ModelError {
+        ModelError::BvhSyntax {
             line: self.line.max(1),
             message: message.into(),
         }
@@ -215,7 +176,7 @@ impl<'a> Lexer<'a> {
         true
     }
 
-    fn next_word(&mut self, what: &str) -> Result<&'a str, BvhError> {
+    fn next_word(&mut self, what: &str) -> Result<&'a str, ModelError> {
         if !self.fill() {
             return Err(self.error(format!("file ends where {what} was expected")));
         }
@@ -229,7 +190,7 @@ impl<'a> Lexer<'a> {
         words
     }
 
-    fn expect(&mut self, keyword: &str) -> Result<(), BvhError> {
+    fn expect(&mut self, keyword: &str) -> Result<(), ModelError> {
         let w = self.next_word(&format!("{keyword:?}"))?;
         if w.eq_ignore_ascii_case(keyword) {
             Ok(())
@@ -238,12 +199,12 @@ impl<'a> Lexer<'a> {
         }
     }
 
-    fn number(&mut self, what: &str) -> Result<f32, BvhError> {
+    fn number(&mut self, what: &str) -> Result<f32, ModelError> {
         let w = self.next_word(what)?;
         parse_finite(w).ok_or_else(|| self.error(format!("{what}: {w:?} is not a finite number")))
     }
 
-    fn vec3(&mut self, what: &str) -> Result<Vec3, BvhError> {
+    fn vec3(&mut self, what: &str) -> Result<Vec3, ModelError> {
         Ok(Vec3::new(
             self.number(what)?,
             self.number(what)?,
@@ -266,7 +227,7 @@ struct OpenJoint {
 
 impl Bvh {
     /// Parses BVH text.
-    pub fn parse(text: &str) -> Result<Bvh, BvhError> {
+    pub fn parse(text: &str) -> Result<Bvh, ModelError> {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut lex = Lexer::new(text);
         lex.expect("HIERARCHY")?;
@@ -442,7 +403,7 @@ impl Bvh {
             let line = i + 1;
             let mut values = Vec::with_capacity(width);
             for word in l.split_whitespace() {
-                let v = parse_finite(word).ok_or_else(|| BvhError::Syntax {
+                let v = parse_finite(word).ok_or_else(|| ModelError::BvhSyntax {
                     line,
                     message: format!("{word:?} is not a finite number"),
                 })?;
@@ -452,13 +413,13 @@ impl Bvh {
                 continue;
             }
             if frames.len() == frame_count {
-                return Err(BvhError::Syntax {
+                return Err(ModelError::BvhSyntax {
                     line,
                     message: format!("more frames than the {frame_count} the header says"),
                 });
             }
             if values.len() != width {
-                return Err(BvhError::Syntax {
+                return Err(ModelError::BvhSyntax {
                     line,
                     message: format!(
                         "frame {} has {} values, the hierarchy has {width} channels",
@@ -470,7 +431,7 @@ impl Bvh {
             frames.push(values);
         }
         if frames.len() != frame_count {
-            return Err(BvhError::Syntax {
+            return Err(ModelError::BvhSyntax {
                 line: text.lines().count().max(1),
                 message: format!(
                     "file ends after {} of the {frame_count} frames the header says",
@@ -486,23 +447,23 @@ impl Bvh {
     }
 
     /// Reads and parses a file; errors name it.
-    pub fn read(path: impl AsRef<Path>) -> Result<Bvh, BvhError> {
+    pub fn read(path: impl AsRef<Path>) -> Result<Bvh, ModelError> {
         let path = path.as_ref();
-        let io = |source| BvhError::Io {
+        let io = |source| ModelError::Io {
             path: path.to_owned(),
             source,
         };
         let size = std::fs::metadata(path).map_err(io)?.len();
         if size > MAX_FILE_BYTES {
-            return Err(BvhError::TooLarge {
+            return Err(ModelError::BvhTooLarge {
                 path: path.to_owned(),
                 bytes: size,
             });
         }
         let bytes = std::fs::read(path).map_err(io)?;
-        let text = String::from_utf8(bytes).map_err(|e| BvhError::InFile {
+        let text = String::from_utf8(bytes).map_err(|e| ModelError::BvhInFile {
             path: path.to_owned(),
-            source: Box::new(BvhError::Syntax {
+            source: Box::new(ModelError::BvhSyntax {
                 line: 1 + e.as_bytes()[..e.utf8_error().valid_up_to()]
                     .iter()
                     .filter(|&&b| b == b'\n')
@@ -510,7 +471,7 @@ impl Bvh {
                 message: "not UTF-8 text".into(),
             }),
         })?;
-        Bvh::parse(&text).map_err(|e| BvhError::InFile {
+        Bvh::parse(&text).map_err(|e| ModelError::BvhInFile {
             path: path.to_owned(),
             source: Box::new(e),
         })
@@ -518,10 +479,10 @@ impl Bvh {
 
     /// Writes the file atomically: a temporary file beside it, then a rename. Fails without
     /// writing if the value does not pass [`Bvh::validate`].
-    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), BvhError> {
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), ModelError> {
         let path = path.as_ref();
         self.validate()?;
-        let io = |source| BvhError::Io {
+        let io = |source| ModelError::Io {
             path: path.to_owned(),
             source,
         };
@@ -587,8 +548,8 @@ impl Bvh {
 
     /// Checks what [`Bvh::parse`] guarantees, for values built in code: parents before
     /// children, every frame as wide as the channels, finite numbers, a positive frame time.
-    pub fn validate(&self) -> Result<(), BvhError> {
-        let bad = |m: String| Err(BvhError::Invalid(m));
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let bad = |m: String| Err(ModelError::BvhInvalid(m));
         if !(self.frame_time_s.is_finite() && self.frame_time_s > 0.0) {
             return bad(format!("frame time {} s", self.frame_time_s));
         }

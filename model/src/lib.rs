@@ -9,6 +9,7 @@ pub mod alignment;
 pub mod body_shape;
 pub mod bvh;
 pub mod clip_file;
+pub mod error;
 pub mod foot_lock;
 pub mod horizon;
 pub mod key_overlay;
@@ -24,3 +25,5 @@ pub mod source;
 pub mod style;
 pub mod tang2018;
 pub mod tang_fit;
+
+pub use error::ModelError;

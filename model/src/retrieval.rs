@@ -12,8 +12,8 @@
 
 use dsp::feature::{FEATURE_DIM, FeatureLayout, phase_of};
 use glam::{Quat, Vec3};
-use thiserror::Error;
 
+use crate::ModelError;
 use crate::key_overlay::{KEY_BLEND_FRAMES, KeyOverlay};
 use crate::motion::{heading, yaw};
 use crate::rig::{JOINT_COUNT, Pose};
@@ -49,14 +49,6 @@ const W_VELOCITY: f32 = 2.0;
 const BLEND_SECONDS: f32 = 0.25;
 /// Smoothing factor of the live energy (per frame, ≈ 0.4 s time constant at 25 fps).
 const ENERGY_ALPHA: f32 = 0.1;
-
-/// Errors from building a retrieval dancer.
-#[derive(Debug, Clone, PartialEq, Error)]
-pub enum RetrievalError {
-    /// No dance yielded a usable one-beat clip.
-    #[error("the clip library is empty: no dance had two beat-phase wraps with finite poses")]
-    EmptyLibrary,
-}
 
 /// One beat of a training dance.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -343,9 +335,9 @@ impl RetrievalDancer {
     }
 
     /// A dancer playing `library`; fails if the library holds no clip.
-    pub fn new(library: ClipLibrary, seed: u64) -> Result<Self, RetrievalError> {
+    pub fn new(library: ClipLibrary, seed: u64) -> Result<Self, ModelError> {
         if library.clips.is_empty() {
-            return Err(RetrievalError::EmptyLibrary);
+            return Err(ModelError::EmptyClipLibrary);
         }
         let mut d = RetrievalDancer {
             library,
@@ -380,7 +372,7 @@ impl RetrievalDancer {
     pub fn from_dances(
         dances: &[(Vec<Pose>, Vec<[f32; FEATURE_DIM]>)],
         seed: u64,
-    ) -> Result<Self, RetrievalError> {
+    ) -> Result<Self, ModelError> {
         Self::new(ClipLibrary::from_dances(dances), seed)
     }
 
@@ -789,10 +781,10 @@ mod tests {
             assert!(heading(first.local_rotations[0]).abs() < 1e-4);
             assert!((c.len as f32 - 60.0 * 25.0 / c.tempo).abs() <= 1.0);
         }
-        assert_eq!(
+        assert!(matches!(
             RetrievalDancer::new(ClipLibrary::from_dances(&[]), 0).err(),
-            Some(RetrievalError::EmptyLibrary)
-        );
+            Some(ModelError::EmptyClipLibrary)
+        ));
     }
 
     #[test]

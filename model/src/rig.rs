@@ -37,7 +37,8 @@ use std::fmt;
 use std::str::FromStr;
 
 use glam::{Quat, Vec3};
-use thiserror::Error;
+
+use crate::ModelError;
 
 /// Number of joints in the rig.
 pub const JOINT_COUNT: usize = 22;
@@ -93,22 +94,6 @@ pub enum Joint {
     RightFoot,
     /// Right ball of the foot, child of `RightFoot`.
     RightToes,
-}
-
-/// Errors from building or editing a rig.
-#[derive(Debug, Clone, PartialEq, Error)]
-pub enum RigError {
-    /// A bone length was negative, infinite or NaN.
-    #[error("invalid length {length} for bone {joint}: must be finite and non-negative")]
-    InvalidBoneLength {
-        /// The bone (named by its child joint).
-        joint: Joint,
-        /// The rejected length in metres.
-        length: f32,
-    },
-    /// A name is not one of the rig's `HumanBodyBones` names.
-    #[error("unknown joint name {0:?}")]
-    UnknownJoint(String),
 }
 
 impl Joint {
@@ -250,10 +235,10 @@ impl fmt::Display for Joint {
 }
 
 impl FromStr for Joint {
-    type Err = RigError;
+    type Err = ModelError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Joint::from_name(s).ok_or_else(|| RigError::UnknownJoint(s.to_owned()))
+        Joint::from_name(s).ok_or_else(|| ModelError::UnknownJoint(s.to_owned()))
     }
 }
 
@@ -323,7 +308,7 @@ impl Skeleton {
 
     /// The default adult's bone directions with these lengths (metres, indexed by joint;
     /// `lengths[Hips]` is the standing hip height).
-    pub fn with_bone_lengths(lengths: &[f32; JOINT_COUNT]) -> Result<Self, RigError> {
+    pub fn with_bone_lengths(lengths: &[f32; JOINT_COUNT]) -> Result<Self, ModelError> {
         let mut skeleton = Self::default_adult();
         for joint in Joint::ALL {
             skeleton.set_bone_length(joint, lengths[joint.index()])?;
@@ -333,9 +318,9 @@ impl Skeleton {
 
     /// Scales the bone ending at `joint` to `length` metres, keeping its direction (for `Hips`,
     /// sets the standing hip height).
-    pub fn set_bone_length(&mut self, joint: Joint, length: f32) -> Result<(), RigError> {
+    pub fn set_bone_length(&mut self, joint: Joint, length: f32) -> Result<(), ModelError> {
         if !length.is_finite() || length < 0.0 {
-            return Err(RigError::InvalidBoneLength { joint, length });
+            return Err(ModelError::InvalidBoneLength { joint, length });
         }
         let i = joint.index();
         // A bone shrunk to zero has lost its direction; the default adult's is the T-pose one.
@@ -348,9 +333,9 @@ impl Skeleton {
 
     /// This skeleton with every offset (so every length and the hip height) times `factor`;
     /// a negative or non-finite `factor` is an error.
-    pub fn scaled(&self, factor: f32) -> Result<Self, RigError> {
+    pub fn scaled(&self, factor: f32) -> Result<Self, ModelError> {
         if !factor.is_finite() || factor < 0.0 {
-            return Err(RigError::InvalidBoneLength {
+            return Err(ModelError::InvalidBoneLength {
                 joint: Joint::Hips,
                 length: self.offsets[0].length() * factor,
             });
@@ -538,7 +523,7 @@ mod tests {
     fn names_round_trip_and_are_unique() {
         for joint in Joint::ALL {
             assert_eq!(Joint::from_name(joint.name()), Some(joint));
-            assert_eq!(joint.name().parse::<Joint>(), Ok(joint));
+            assert_eq!(joint.name().parse::<Joint>().ok(), Some(joint));
             assert_eq!(joint.to_string(), joint.name());
         }
         assert_eq!(Joint::from_name("lefthand"), Some(Joint::LeftHand));
@@ -546,7 +531,7 @@ mod tests {
         assert_eq!(Joint::from_name(""), None);
         assert!(matches!(
             "Tail".parse::<Joint>(),
-            Err(RigError::UnknownJoint(_))
+            Err(ModelError::UnknownJoint(_))
         ));
     }
 

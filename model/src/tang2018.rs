@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
+use crate::ModelError;
+
 /// Points per frame in the data set.
 pub const TANG_POINTS: usize = 23;
 /// Motion frames per second.
@@ -21,30 +23,6 @@ pub const TANG_FPS: f64 = 25.0;
 /// waltz W).
 pub fn style_letter(dance: &str) -> Option<char> {
     dance.strip_prefix("DANCE_")?.chars().next()
-}
-
-/// Why a dance could not be read; every variant names the file.
-#[derive(Debug, thiserror::Error)]
-pub enum TangError {
-    /// A file could not be opened or read.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What the OS said.
-        source: std::io::Error,
-    },
-    /// A file was read but its content is not what the data set holds.
-    #[error("{path}: {reason}")]
-    Malformed {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        reason: String,
-    },
-    /// Neither `skeletons.npy` + `center.npy` nor `skeletons.json` exists.
-    #[error("{0}: no skeletons.npy/center.npy or skeletons.json")]
-    NoMotion(PathBuf),
 }
 
 /// One dance as stored: noisy points, the body's centre, the danced span, the song.
@@ -76,15 +54,15 @@ impl TangDance {
     }
 }
 
-fn malformed(path: &Path, reason: impl Into<String>) -> TangError {
-    TangError::Malformed {
+fn malformed(path: &Path, reason: impl Into<String>) -> ModelError {
+    ModelError::DataSetMalformed {
         path: path.to_path_buf(),
         reason: reason.into(),
     }
 }
 
-fn read_npy(path: &Path) -> Result<ndarray::ArrayD<f32>, TangError> {
-    let file = fs::File::open(path).map_err(|source| TangError::Io {
+fn read_npy(path: &Path) -> Result<ndarray::ArrayD<f32>, ModelError> {
+    let file = fs::File::open(path).map_err(|source| ModelError::Io {
         path: path.to_path_buf(),
         source,
     })?;
@@ -94,7 +72,7 @@ fn read_npy(path: &Path) -> Result<ndarray::ArrayD<f32>, TangError> {
 
 use ndarray_npy::ReadNpyExt;
 
-fn finite(v: Vec3, path: &Path) -> Result<Vec3, TangError> {
+fn finite(v: Vec3, path: &Path) -> Result<Vec3, ModelError> {
     if v.is_finite() {
         Ok(v)
     } else {
@@ -102,7 +80,7 @@ fn finite(v: Vec3, path: &Path) -> Result<Vec3, TangError> {
     }
 }
 
-fn from_npy(dir: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), TangError> {
+fn from_npy(dir: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), ModelError> {
     let sp = dir.join("skeletons.npy");
     let cp = dir.join("center.npy");
     let s = read_npy(&sp)?;
@@ -150,7 +128,7 @@ fn from_npy(dir: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), TangErr
     Ok((points, center))
 }
 
-fn vec3(v: &serde_json::Value, path: &Path) -> Result<Vec3, TangError> {
+fn vec3(v: &serde_json::Value, path: &Path) -> Result<Vec3, ModelError> {
     let a = v
         .as_array()
         .filter(|a| a.len() == 3)
@@ -163,15 +141,15 @@ fn vec3(v: &serde_json::Value, path: &Path) -> Result<Vec3, TangError> {
     finite(Vec3::new(f(0)?, f(1)?, f(2)?), path)
 }
 
-fn read_json(path: &Path) -> Result<serde_json::Value, TangError> {
-    let text = fs::read_to_string(path).map_err(|source| TangError::Io {
+fn read_json(path: &Path) -> Result<serde_json::Value, ModelError> {
+    let text = fs::read_to_string(path).map_err(|source| ModelError::Io {
         path: path.to_path_buf(),
         source,
     })?;
     serde_json::from_str(&text).map_err(|e| malformed(path, format!("invalid JSON: {e}")))
 }
 
-fn from_json(path: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), TangError> {
+fn from_json(path: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), ModelError> {
     let v = read_json(path)?;
     let skel = v
         .get("skeletons")
@@ -210,7 +188,7 @@ fn from_json(path: &Path) -> Result<(Vec<[Vec3; TANG_POINTS]>, Vec<Vec3>), TangE
     Ok((points, center))
 }
 
-fn read_span(path: &Path) -> Result<Option<(f64, f64)>, TangError> {
+fn read_span(path: &Path) -> Result<Option<(f64, f64)>, ModelError> {
     if !path.exists() {
         return Ok(None);
     }
@@ -225,7 +203,7 @@ fn read_span(path: &Path) -> Result<Option<(f64, f64)>, TangError> {
 
 /// Reads one dance folder (either layout). A dance without `audio.mp3` is still returned, as
 /// motion only.
-pub fn load_dance(dir: &Path) -> Result<TangDance, TangError> {
+pub fn load_dance(dir: &Path) -> Result<TangDance, ModelError> {
     let name = dir
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -239,7 +217,7 @@ pub fn load_dance(dir: &Path) -> Result<TangDance, TangError> {
     } else if dir.join("skeletons.json").exists() {
         from_json(&dir.join("skeletons.json"))?
     } else {
-        return Err(TangError::NoMotion(dir.to_path_buf()));
+        return Err(ModelError::DataSetNoMotion(dir.to_path_buf()));
     };
     if points.is_empty() {
         return Err(malformed(dir, "no frames"));
@@ -256,8 +234,8 @@ pub fn load_dance(dir: &Path) -> Result<TangDance, TangError> {
 }
 
 /// Folders under `root` that look like dances (`DANCE_*`), sorted by name.
-pub fn dance_dirs(root: &Path) -> Result<Vec<PathBuf>, TangError> {
-    let rd = fs::read_dir(root).map_err(|source| TangError::Io {
+pub fn dance_dirs(root: &Path) -> Result<Vec<PathBuf>, ModelError> {
+    let rd = fs::read_dir(root).map_err(|source| ModelError::Io {
         path: root.to_path_buf(),
         source,
     })?;
@@ -328,7 +306,10 @@ mod tests {
         let e = load_dance(&dir).unwrap_err().to_string();
         assert!(e.contains("skeletons.npy"), "{e}");
         let empty = scratch("DANCE_T_0");
-        assert!(matches!(load_dance(&empty), Err(TangError::NoMotion(_))));
+        assert!(matches!(
+            load_dance(&empty),
+            Err(ModelError::DataSetNoMotion(_))
+        ));
         fs::remove_dir_all(&dir).ok();
         fs::remove_dir_all(&empty).ok();
     }

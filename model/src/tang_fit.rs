@@ -90,8 +90,8 @@
 //! lengths cannot follow points whose distances change from frame to frame.
 
 use glam::{Mat3, Quat, Vec3, Vec4};
-use thiserror::Error;
 
+use crate::ModelError;
 use crate::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use crate::rotation::{normalize_or_identity, rotation_between, swing_twist, twist_angle};
 use crate::tang2018::{TANG_FPS, TANG_POINTS, TangDance};
@@ -156,39 +156,6 @@ const END_WEIGHT: f32 = 2.0;
 /// Heel direction from the ankle in the foot's rest frame; only its side of the ankle–toe
 /// line matters (down and back, in the sagittal plane).
 const HEEL_REST: Vec3 = Vec3::new(0.0, -0.7, -0.5);
-
-/// Why a dance could not be fitted.
-#[derive(Debug, Clone, PartialEq, Error)]
-pub enum FitError {
-    /// The dance is too short to estimate bone lengths from.
-    #[error("{name}: {frames} frames, need at least {min}")]
-    TooFewFrames {
-        /// The dance.
-        name: String,
-        /// Frames it has (or usable frames, when the rest are degenerate).
-        frames: usize,
-        /// Frames needed.
-        min: usize,
-    },
-    /// `points` and `center` disagree on the number of frames.
-    #[error("{name}: {points} frames of points but {centers} of centre")]
-    LengthMismatch {
-        /// The dance.
-        name: String,
-        /// Frames of points.
-        points: usize,
-        /// Frames of centre.
-        centers: usize,
-    },
-    /// The points do not describe a body (e.g. a bone of median length zero).
-    #[error("{name}: degenerate data: {reason}")]
-    Degenerate {
-        /// The dance.
-        name: String,
-        /// What is wrong.
-        reason: String,
-    },
-}
 
 /// A dance fitted to the rig.
 #[derive(Clone, Debug)]
@@ -375,7 +342,7 @@ fn sorted(mut v: Vec<f32>) -> Vec<f32> {
 }
 
 /// Median lengths (sides pooled) and the median relative IQR over the measured bones.
-fn estimate_lengths(name: &str, samples: &[[f32; MEASURED]]) -> Result<(Lengths, f64), FitError> {
+fn estimate_lengths(name: &str, samples: &[[f32; MEASURED]]) -> Result<(Lengths, f64), ModelError> {
     let column = |i: usize| sorted(samples.iter().map(|s| s[i]).collect());
     let pooled = |i: usize| sorted(samples.iter().flat_map(|s| [s[i], s[i + 1]]).collect());
     let median = |v: &[f32]| quantile(v, 0.5) as f32;
@@ -419,7 +386,7 @@ fn estimate_lengths(name: &str, samples: &[[f32; MEASURED]]) -> Result<(Lengths,
         .iter()
         .find(|(_, v)| v.is_nan() || *v <= 1e-3 || v.is_infinite())
     {
-        return Err(FitError::Degenerate {
+        return Err(ModelError::FitDegenerate {
             name: name.to_owned(),
             reason: format!("median {bone} length is {len} m"),
         });
@@ -793,18 +760,18 @@ fn smooth(poses: &mut [Pose]) {
 }
 
 /// Fits the rig to a tang2018 dance; see the module docs for the mapping and the method.
-pub fn fit_dance(dance: &TangDance) -> Result<TangFit, FitError> {
+pub fn fit_dance(dance: &TangDance) -> Result<TangFit, ModelError> {
     let name = &dance.name;
     let frames = dance.points.len();
     if dance.center.len() != frames {
-        return Err(FitError::LengthMismatch {
+        return Err(ModelError::FitLengthMismatch {
             name: name.clone(),
             points: frames,
             centers: dance.center.len(),
         });
     }
     if frames < MIN_FRAMES {
-        return Err(FitError::TooFewFrames {
+        return Err(ModelError::FitTooFewFrames {
             name: name.clone(),
             frames,
             min: MIN_FRAMES,
@@ -824,7 +791,7 @@ pub fn fit_dance(dance: &TangDance) -> Result<TangFit, FitError> {
         .map(|(p, _)| measure(p))
         .collect();
     if samples.len() < MIN_FRAMES {
-        return Err(FitError::TooFewFrames {
+        return Err(ModelError::FitTooFewFrames {
             name: name.clone(),
             frames: samples.len(),
             min: MIN_FRAMES,
@@ -842,15 +809,16 @@ pub fn fit_dance(dance: &TangDance) -> Result<TangFit, FitError> {
         })
         .collect();
     let repaired_frames = poses.iter().filter(|p| p.is_none()).count();
-    let first = poses
-        .iter()
-        .flatten()
-        .next()
-        .copied()
-        .ok_or_else(|| FitError::Degenerate {
-            name: name.clone(),
-            reason: "no frame could be fitted".into(),
-        })?;
+    let first =
+        poses
+            .iter()
+            .flatten()
+            .next()
+            .copied()
+            .ok_or_else(|| ModelError::FitDegenerate {
+                name: name.clone(),
+                reason: "no frame could be fitted".into(),
+            })?;
     let mut held = first;
     for pose in poses.iter_mut() {
         match pose {
@@ -1213,12 +1181,12 @@ mod tests {
         let s = synthetic(MIN_FRAMES - 1, 0.0);
         assert!(matches!(
             fit_dance(&s.dance),
-            Err(FitError::TooFewFrames { frames: 4, .. })
+            Err(ModelError::FitTooFewFrames { frames: 4, .. })
         ));
         let mut s = synthetic(10, 0.0);
         s.dance.center.pop();
         let e = fit_dance(&s.dance).unwrap_err();
-        assert!(matches!(e, FitError::LengthMismatch { .. }));
+        assert!(matches!(e, ModelError::FitLengthMismatch { .. }));
         assert!(e.to_string().contains("synthetic"), "{e}");
         let mut s = synthetic(10, 0.0);
         for p in &mut s.dance.points[2..] {
@@ -1226,7 +1194,7 @@ mod tests {
         }
         assert!(matches!(
             fit_dance(&s.dance),
-            Err(FitError::TooFewFrames { frames: 2, .. })
+            Err(ModelError::FitTooFewFrames { frames: 2, .. })
         ));
         let mut s = synthetic(10, 0.0);
         for p in &mut s.dance.points {
@@ -1234,7 +1202,7 @@ mod tests {
             p[3] = p[4];
         }
         let e = fit_dance(&s.dance).unwrap_err();
-        assert!(matches!(e, FitError::Degenerate { .. }), "{e}");
+        assert!(matches!(e, ModelError::FitDegenerate { .. }), "{e}");
         assert!(e.to_string().contains("upper arm"), "{e}");
     }
 

@@ -3,9 +3,7 @@
 use std::io;
 use std::path::{Path, PathBuf};
 
-use model::metrics::MetricsError;
-use model::tang_fit::FitError;
-use model::tang2018::TangError;
+use model::ModelError;
 
 /// Everything that can go wrong in work on files: an audio file decoded or analysed, the data
 /// set read, a dance built, a result written. Every message names the file or the dance.
@@ -55,23 +53,19 @@ pub enum OfflineError {
         /// What the analyzer said.
         source: dsp::DspError,
     },
-    /// The data set, or a dance of it, could not be read.
+    /// A dance of the data set could not be read, its points could not be fitted to the rig,
+    /// or its fitted motion is not one the metrics take (not finite): the model crate's error,
+    /// whose variant tells which.
     #[error(transparent)]
-    DataSet(#[from] TangError),
+    Model(#[from] ModelError),
     /// The data set's folder could not be listed.
     #[error("reading {}", path.display())]
     DataSetFolder {
         /// The folder (`DATA/tang2018`).
         path: PathBuf,
         /// Why.
-        source: TangError,
+        source: ModelError,
     },
-    /// A dance's points could not be fitted to the rig.
-    #[error(transparent)]
-    Fit(#[from] FitError),
-    /// A dance's fitted motion is not one the metrics take (not finite).
-    #[error(transparent)]
-    Motion(#[from] MetricsError),
     /// A dance's reference beats could not be read.
     #[error("no reference beats ({}: {error})", path.display())]
     ReferenceBeats {
@@ -123,9 +117,7 @@ impl OfflineError {
             | OfflineError::ReferenceBeats { path, .. }
             | OfflineError::Write { path, .. } => Some(path),
             OfflineError::Analysis { .. }
-            | OfflineError::DataSet(_)
-            | OfflineError::Fit(_)
-            | OfflineError::Motion(_)
+            | OfflineError::Model(_)
             | OfflineError::Speed { .. }
             | OfflineError::NothingBuilt { .. }
             | OfflineError::Npz { .. } => None,

@@ -54,9 +54,45 @@ pub enum ProtocolError {
         /// The ports that exist.
         available: Vec<String>,
     },
-    /// A VRChat tracker map (`[output.vrchat.trackers]`) says something VRChat cannot use.
-    #[error("VRChat tracker map is not valid: {0}")]
-    TrackerMap(#[from] TrackerMapError),
+    /// A VRChat tracker map (`[output.vrchat.trackers]`) key that is neither a tracker number
+    /// nor "head".
+    #[error("VRChat tracker map is not valid: key {0:?} is not a tracker number 1..8 or \"head\"")]
+    TrackerBadKey(String),
+    /// A VRChat tracker number written with a leading zero ("01"), which would read as a
+    /// different key.
+    #[error(
+        "VRChat tracker map is not valid: key {0:?}: write tracker numbers without leading zeros"
+    )]
+    TrackerLeadingZero(String),
+    /// A tracker number VRChat does not have.
+    #[error("VRChat tracker map is not valid: key {0:?}: VRChat has trackers 1..8 only")]
+    TrackerOutOfRange(String),
+    /// More trackers than VRChat has.
+    #[error("VRChat tracker map is not valid: {0} trackers: VRChat has 8 at most")]
+    TooManyTrackers(usize),
+    /// The same tracker given twice in a VRChat tracker map.
+    #[error("VRChat tracker map is not valid: tracker {0:?} is given twice")]
+    TrackerDuplicate(String),
+    /// A tracker number missing below a higher one: VRChat numbers its trackers densely from 1.
+    #[error(
+        "VRChat tracker map is not valid: tracker {missing} is missing but tracker {highest} is given (number them 1, 2, 3, ... without gaps)"
+    )]
+    TrackerGap {
+        /// The lowest number not given.
+        missing: usize,
+        /// The highest number given.
+        highest: usize,
+    },
+    /// A VRChat tracker map bone name that is not a Unity `HumanBodyBones` name.
+    #[error(
+        "VRChat tracker map is not valid: {key} = {bone:?}: not a Unity HumanBodyBones name (e.g. \"Hips\", \"LeftFoot\")"
+    )]
+    TrackerUnknownBone {
+        /// The tracker key it is given for.
+        key: String,
+        /// The name as given.
+        bone: String,
+    },
     /// The MIDI port exists but connecting failed.
     #[error("cannot connect to MIDI input {port:?}: {reason}")]
     MidiConnect {
@@ -64,43 +100,5 @@ pub enum ProtocolError {
         port: String,
         /// midir's reason.
         reason: String,
-    },
-}
-
-/// What is wrong with a VRChat tracker map; each names the entry at fault.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum TrackerMapError {
-    /// A key that is neither a tracker number nor "head".
-    #[error("key {0:?} is not a tracker number 1..8 or \"head\"")]
-    BadKey(String),
-    /// A tracker number written with a leading zero ("01"), which would read as a different key.
-    #[error("key {0:?}: write tracker numbers without leading zeros")]
-    LeadingZero(String),
-    /// A tracker number VRChat does not have.
-    #[error("key {0:?}: VRChat has trackers 1..8 only")]
-    OutOfRange(String),
-    /// More trackers than VRChat has.
-    #[error("{0} trackers: VRChat has 8 at most")]
-    TooMany(usize),
-    /// The same tracker given twice.
-    #[error("tracker {0:?} is given twice")]
-    Duplicate(String),
-    /// A number missing below a higher one: VRChat numbers its trackers densely from 1.
-    #[error(
-        "tracker {missing} is missing but tracker {highest} is given (number them 1, 2, 3, ... without gaps)"
-    )]
-    Gap {
-        /// The lowest number not given.
-        missing: usize,
-        /// The highest number given.
-        highest: usize,
-    },
-    /// A bone name that is not a Unity `HumanBodyBones` name.
-    #[error("{key} = {bone:?}: not a Unity HumanBodyBones name (e.g. \"Hips\", \"LeftFoot\")")]
-    UnknownBone {
-        /// The tracker key it is given for.
-        key: String,
-        /// The name as given.
-        bone: String,
     },
 }

@@ -32,7 +32,7 @@ pub mod vrchat;
 
 pub use control::{ControlEvent, ControlParser, Quantize};
 pub use control_receiver::{ControlReceiver, DEFAULT_CONTROL_PORT};
-pub use error::{ProtocolError, TrackerMapError};
+pub use error::ProtocolError;
 pub use frame::{AnalysisEvent, BodyFrame, BoneSample};
 pub use midi::{MidiMessage, MidiParser};
 pub use midi_clock::MidiClockTempo;

@@ -1,7 +1,7 @@
 //! VRChat OSC trackers (<https://docs.vrchat.com/docs/osc-trackers>): up to eight body trackers
 //! plus the head, each a world position and Unity Euler angles.
 
-use crate::error::{ProtocolError, TrackerMapError};
+use crate::error::ProtocolError;
 use crate::finite;
 use crate::frame::{BodyFrame, BoneSample};
 use crate::human_bones::canonical_bone;
@@ -76,7 +76,7 @@ impl VrchatTrackerMap {
     /// that is not a `HumanBodyBones` bone (case is forgiven and corrected).
     pub fn new<S: AsRef<str>>(trackers: &[S], head: Option<&str>) -> Result<Self, ProtocolError> {
         if trackers.len() > MAX_TRACKERS {
-            return Err(TrackerMapError::TooMany(trackers.len()).into());
+            return Err(ProtocolError::TooManyTrackers(trackers.len()));
         }
         let trackers = trackers
             .iter()
@@ -109,7 +109,7 @@ impl VrchatTrackerMap {
                 &mut numbered[tracker_index(key)?]
             };
             if slot.is_some() {
-                return Err(TrackerMapError::Duplicate(key.to_string()).into());
+                return Err(ProtocolError::TrackerDuplicate(key.to_string()));
             }
             *slot = Some(bone_for(key, bone)?);
         }
@@ -119,11 +119,10 @@ impl VrchatTrackerMap {
                 .iter()
                 .rposition(Option::is_some)
                 .map_or(0, |i| i + 1);
-            return Err(TrackerMapError::Gap {
+            return Err(ProtocolError::TrackerGap {
                 missing: missing + 1,
                 highest,
-            }
-            .into());
+            });
         }
         Ok(Self {
             trackers: numbered.iter().map_while(|b| *b).collect(),
@@ -143,21 +142,21 @@ impl VrchatTrackerMap {
 }
 
 /// Index 0..8 of a tracker number key "1".."8".
-fn tracker_index(key: &str) -> Result<usize, TrackerMapError> {
+fn tracker_index(key: &str) -> Result<usize, ProtocolError> {
     if key.is_empty() || !key.bytes().all(|b| b.is_ascii_digit()) {
-        return Err(TrackerMapError::BadKey(key.to_string()));
+        return Err(ProtocolError::TrackerBadKey(key.to_string()));
     }
     if key.len() > 1 && key.starts_with('0') {
-        return Err(TrackerMapError::LeadingZero(key.to_string()));
+        return Err(ProtocolError::TrackerLeadingZero(key.to_string()));
     }
     match key.parse::<usize>() {
         Ok(n) if (1..=MAX_TRACKERS).contains(&n) => Ok(n - 1),
-        _ => Err(TrackerMapError::OutOfRange(key.to_string())),
+        _ => Err(ProtocolError::TrackerOutOfRange(key.to_string())),
     }
 }
 
-fn bone_for(key: &str, bone: &str) -> Result<&'static str, TrackerMapError> {
-    canonical_bone(bone).ok_or_else(|| TrackerMapError::UnknownBone {
+fn bone_for(key: &str, bone: &str) -> Result<&'static str, ProtocolError> {
+    canonical_bone(bone).ok_or_else(|| ProtocolError::TrackerUnknownBone {
         key: key.to_string(),
         bone: bone.to_string(),
     })
@@ -457,53 +456,53 @@ mod tests {
         let err = |entries: &[(&str, &str)]| match VrchatTrackerMap::from_numbered(
             entries.iter().copied(),
         ) {
-            Err(ProtocolError::TrackerMap(e)) => e,
-            other => panic!("{entries:?}: {other:?}"),
+            Err(e) => e,
+            Ok(map) => panic!("{entries:?}: {map:?}"),
         };
-        use TrackerMapError::*;
-        assert_eq!(err(&[("0", "Hips")]), OutOfRange("0".into()));
-        assert_eq!(err(&[("9", "Hips")]), OutOfRange("9".into()));
-        assert_eq!(
+        use ProtocolError::*;
+        assert!(matches!(err(&[("0", "Hips")]), TrackerOutOfRange(k) if k == "0"));
+        assert!(matches!(err(&[("9", "Hips")]), TrackerOutOfRange(k) if k == "9"));
+        assert!(matches!(
             err(&[("99999999999999999999999", "Hips")]),
-            OutOfRange("99999999999999999999999".into())
-        );
-        assert_eq!(
+            TrackerOutOfRange(k) if k == "99999999999999999999999"
+        ));
+        assert!(matches!(
             err(&[("1", "Hips"), ("2", "Chest"), ("4", "Head")]),
-            Gap {
+            TrackerGap {
                 missing: 3,
                 highest: 4
             }
-        );
-        assert_eq!(
+        ));
+        assert!(matches!(
             err(&[("2", "Chest")]),
-            Gap {
+            TrackerGap {
                 missing: 1,
                 highest: 2
             }
-        );
-        assert_eq!(err(&[("1", "Hips"), ("1", "Chest")]), Duplicate("1".into()));
-        assert_eq!(
+        ));
+        assert!(matches!(
+            err(&[("1", "Hips"), ("1", "Chest")]),
+            TrackerDuplicate(k) if k == "1"
+        ));
+        assert!(matches!(
             err(&[("head", "Head"), ("head", "Neck")]),
-            Duplicate("head".into())
-        );
-        assert_eq!(err(&[("01", "Hips")]), LeadingZero("01".into()));
+            TrackerDuplicate(k) if k == "head"
+        ));
+        assert!(matches!(err(&[("01", "Hips")]), TrackerLeadingZero(k) if k == "01"));
         for key in ["one", "", " 1", "-1", "Head", "1.0", "+1"] {
-            assert_eq!(err(&[(key, "Hips")]), BadKey(key.into()), "{key:?}");
+            assert!(
+                matches!(err(&[(key, "Hips")]), TrackerBadKey(ref k) if k == key),
+                "{key:?}"
+            );
         }
-        assert_eq!(
+        assert!(matches!(
             err(&[("1", "Hips"), ("2", "Tail")]),
-            UnknownBone {
-                key: "2".into(),
-                bone: "Tail".into()
-            }
-        );
-        assert_eq!(
+            TrackerUnknownBone { key, bone } if key == "2" && bone == "Tail"
+        ));
+        assert!(matches!(
             err(&[("head", "")]),
-            UnknownBone {
-                key: "head".into(),
-                bone: "".into()
-            }
-        );
+            TrackerUnknownBone { key, bone } if key == "head" && bone.is_empty()
+        ));
         let message = VrchatTrackerMap::from_numbered([("1", "Hips"), ("3", "Chest")])
             .unwrap_err()
             .to_string();
@@ -517,13 +516,11 @@ mod tests {
     fn listed_maps_are_validated_too() {
         assert!(matches!(
             VrchatTrackerMap::new(&["Hips"; 9], None),
-            Err(ProtocolError::TrackerMap(TrackerMapError::TooMany(9)))
+            Err(ProtocolError::TooManyTrackers(9))
         ));
         assert!(matches!(
             VrchatTrackerMap::new(&["Hips", "Hipz"], None),
-            Err(ProtocolError::TrackerMap(
-                TrackerMapError::UnknownBone { .. }
-            ))
+            Err(ProtocolError::TrackerUnknownBone { .. })
         ));
         let m = VrchatTrackerMap::new(&["hips"], None).unwrap();
         assert_eq!((m.trackers(), m.head()), (&["Hips"][..], None));

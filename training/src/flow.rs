@@ -7,9 +7,10 @@ use burn::module::{Module, Param};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, activation};
 
 use crate::layers::{Dense, constant2, param1, param2, store, values};
+use model::ModelError;
 use model::neural::config::{COUPLING_SCALE_OFFSET, FlowConfig};
 use model::neural::lu;
-use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::tensors::NamedTensors;
 
 /// ln(2π) / 2, the base density's constant per dimension.
 pub const HALF_LN_2PI: f32 = 0.918_938_5;
@@ -42,7 +43,7 @@ impl FlowStep {
         p: &str,
         c: &FlowConfig,
         device: &Device,
-    ) -> Result<Self, WeightError> {
+    ) -> Result<Self, ModelError> {
         let d = c.dim;
         Ok(FlowStep {
             an_bias: param1(t, &format!("{p}.an_bias"), d, device)?,
@@ -177,7 +178,7 @@ impl Flow {
         prefix: &str,
         c: &FlowConfig,
         device: &Device,
-    ) -> Result<Self, WeightError> {
+    ) -> Result<Self, ModelError> {
         let steps = (0..c.steps)
             .map(|k| FlowStep::load(t, &format!("{prefix}.{k}"), c, device))
             .collect::<Result<_, _>>()?;

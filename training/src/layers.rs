@@ -4,9 +4,10 @@
 use burn::module::{Module, Param, ParamId};
 use burn::tensor::{Device, Tensor, TensorData};
 
+use model::ModelError;
 use model::neural::config::LN_EPS;
 use model::neural::rng::Rng;
-use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::tensors::NamedTensors;
 
 /// A trainable parameter from the named tensor `name` of shape `[n]`.
 pub fn param1(
@@ -14,7 +15,7 @@ pub fn param1(
     name: &str,
     n: usize,
     device: &Device,
-) -> Result<Param<Tensor<1>>, WeightError> {
+) -> Result<Param<Tensor<1>>, ModelError> {
     let v = t.get(name, &[n])?.to_vec();
     Ok(Param::from_tensor(Tensor::from_data(
         TensorData::new(v, [n]),
@@ -29,7 +30,7 @@ pub fn param2(
     r: usize,
     c: usize,
     device: &Device,
-) -> Result<Param<Tensor<2>>, WeightError> {
+) -> Result<Param<Tensor<2>>, ModelError> {
     let v = t.get(name, &[r, c])?.to_vec();
     Ok(Param::from_tensor(Tensor::from_data(
         TensorData::new(v, [r, c]),
@@ -100,7 +101,7 @@ impl Dense {
         i: usize,
         o: usize,
         device: &Device,
-    ) -> Result<Self, WeightError> {
+    ) -> Result<Self, ModelError> {
         Ok(Dense {
             w: param2(t, &format!("{name}.w"), i, o, device)?,
             b: param1(t, &format!("{name}.b"), o, device)?,
@@ -135,7 +136,7 @@ impl LayerNorm {
         name: &str,
         d: usize,
         device: &Device,
-    ) -> Result<Self, WeightError> {
+    ) -> Result<Self, ModelError> {
         Ok(LayerNorm {
             g: param1(t, &format!("{name}.g"), d, device)?,
             b: param1(t, &format!("{name}.b"), d, device)?,

@@ -8,9 +8,10 @@ use crate::body_shape::BodyShape;
 use crate::flow::Flow;
 use crate::layers::WeightRows;
 use crate::transformer::Transformer;
+use model::ModelError;
 use model::motion::{MOTION_FEATURE_DIM, ROTATIONS};
 use model::neural::config::NetConfig;
-use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::tensors::NamedTensors;
 use model::neural::token::{
     FLAG_AT, FTG_AT, KEY_AT, KEY_CONDITION_CLAMP, KEY_CONDITION_DIM, KEY_ROT_DIM, LEVEL_AT,
     POSE_AT, TOKEN_DIM,
@@ -158,9 +159,9 @@ pub struct Net {
 
 impl Net {
     /// Builds the network from named tensors.
-    pub fn load(t: &NamedTensors, c: &NetConfig, device: &Device) -> Result<Self, WeightError> {
+    pub fn load(t: &NamedTensors, c: &NetConfig, device: &Device) -> Result<Self, ModelError> {
         c.check()
-            .map_err(|e| WeightError::Missing(format!("(bad config: {e})")))?;
+            .map_err(|e| ModelError::WeightMissing(format!("(bad config: {e})")))?;
         Ok(Net {
             transformer: Transformer::load(t, c, device)?,
             flow: Flow::load(t, "flow", &c.flow(), device)?,

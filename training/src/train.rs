@@ -11,11 +11,12 @@ use crate::device::{cpu_device, training_device};
 use crate::layers::{WeightRows, values};
 use crate::net::{FreeRun, FreeRunOutcome, InputPath, Net};
 use dsp::feature::FEATURE_DIM as M;
+use model::ModelError;
 use model::motion::{MOTION_FEATURE_DIM as P, MotionFeatures, ROTATIONS};
 use model::neural::config::NetConfig;
 use model::neural::file::NeuralModel;
 use model::neural::rng::Rng;
-use model::neural::tensors::{NamedTensors, WeightError};
+use model::neural::tensors::NamedTensors;
 use model::neural::token::{self, KEY_ROT_DIM, Normalizer, TOKEN_DIM};
 
 /// Shortest key-pose horizon drawn in training, frames (0.5 s).
@@ -78,7 +79,7 @@ pub struct Corpus {
 /// Rebuilds `model` to read the key pose in its flow (`key_to_flow`) as well as through the
 /// transformer, the flow's new inputs weighted zero: it dances exactly as before until
 /// training moves them (a key-pose loss then reaches the key by the shortest path).
-pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
+pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), ModelError> {
     widen_flow_context(model, |c| c.key_to_flow = true)
 }
 
@@ -87,7 +88,7 @@ pub fn add_key_to_flow(model: &mut NeuralModel) -> Result<(), WeightError> {
 fn widen_flow_context(
     model: &mut NeuralModel,
     change: impl Fn(&mut NetConfig),
-) -> Result<(), WeightError> {
+) -> Result<(), ModelError> {
     let before = model.config;
     let mut after = before;
     change(&mut after);
@@ -618,7 +619,7 @@ pub struct StepLoss {
 
 impl Trainer {
     /// Starts training from `model`'s weights (fresh or resumed; the optimiser starts fresh).
-    pub fn new(model: NeuralModel) -> Result<Self, WeightError> {
+    pub fn new(model: NeuralModel) -> Result<Self, ModelError> {
         let device = training_device();
         let net = Net::load(&model.tensors, &model.config, &device)?;
         let optim = AdamConfig::new()
@@ -647,7 +648,7 @@ impl Trainer {
     /// Keeps a frozen copy of the current weights as the critic of the key-pose rollouts: the
     /// approach to a key is penalised by how unlike dancing it looks to the network as it was
     /// before it learnt to reach keys (the key loss alone taught a jump onto the key).
-    pub fn with_critic(mut self) -> Result<Self, WeightError> {
+    pub fn with_critic(mut self) -> Result<Self, ModelError> {
         let tensors = self.model().tensors.clone();
         let critic = Net::load(&tensors, &self.model.config, &self.device)?.no_grad();
         self.critic = Some(critic);
@@ -777,7 +778,7 @@ impl Trainer {
     }
 
     /// Mean NLL over `batches`, nats per frame, without gradients.
-    pub fn evaluate(&mut self, batches: &[Batch]) -> Result<f64, WeightError> {
+    pub fn evaluate(&mut self, batches: &[Batch]) -> Result<f64, ModelError> {
         self.model();
         self.evaluate_weights(&self.model.tensors, batches)
     }
@@ -788,14 +789,14 @@ impl Trainer {
         &self,
         tensors: &NamedTensors,
         batches: &[Batch],
-    ) -> Result<f64, WeightError> {
+    ) -> Result<f64, ModelError> {
         let v = self.frame_nll_of(tensors, batches)?;
         Ok(v.iter().map(|&x| x as f64).sum::<f64>() / v.len().max(1) as f64)
     }
 
     /// The NLL of every frame of `batches`, nats, in order (sequence by sequence, token by
     /// token), without gradients.
-    pub fn frame_nll(&mut self, batches: &[Batch]) -> Result<Vec<f32>, WeightError> {
+    pub fn frame_nll(&mut self, batches: &[Batch]) -> Result<Vec<f32>, ModelError> {
         self.model();
         self.frame_nll_of(&self.model.tensors, batches)
     }
@@ -804,7 +805,7 @@ impl Trainer {
         &self,
         weights: &NamedTensors,
         batches: &[Batch],
-    ) -> Result<Vec<f32>, WeightError> {
+    ) -> Result<Vec<f32>, ModelError> {
         let device = cpu_device();
         let config = self.model.config;
         let net = Net::load(weights, &config, &device)?;
@@ -872,7 +873,7 @@ mod tests {
     }
 
     /// A rebuild of a network's flow inputs ([`add_key_to_flow`]).
-    type Widen = fn(&mut NeuralModel) -> Result<(), WeightError>;
+    type Widen = fn(&mut NeuralModel) -> Result<(), ModelError>;
 
     /// Feeds `before` and `after` the same 12 random tokens (a key pending from token
     /// `key_from` on) and checks that they sample alike from the same noise.

@@ -6,8 +6,9 @@ use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData, activation};
 
 use crate::layers::{Dense, LayerNorm, WeightRows, param1, param2, store};
+use model::ModelError;
 use model::neural::config::{NetConfig, rope_frequency};
-use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
+use model::neural::tensors::{NamedTensors, STYLE_EMBEDDING};
 use model::neural::token::FLAG_AT;
 
 /// One pre-norm block: windowed causal self-attention, then a ReLU feed-forward.
@@ -88,7 +89,7 @@ impl Block {
 
 impl Transformer {
     /// Loads the transformer's weights.
-    pub fn load(t: &NamedTensors, c: &NetConfig, device: &Device) -> Result<Self, WeightError> {
+    pub fn load(t: &NamedTensors, c: &NetConfig, device: &Device) -> Result<Self, ModelError> {
         let d = c.d_model;
         let blocks = (0..c.layers)
             .map(|l| {
@@ -102,7 +103,7 @@ impl Transformer {
                     ff2: Dense::load(t, &format!("{p}.ff2"), c.ff, d, device)?,
                 })
             })
-            .collect::<Result<_, WeightError>>()?;
+            .collect::<Result<_, ModelError>>()?;
         Ok(Transformer {
             embed: Dense::load(t, "embed", c.token_dim(), d, device)?,
             none: param1(t, "embed.none", d, device)?,

@@ -57,7 +57,8 @@
 
 use glam::{Mat3, Quat, Vec3};
 
-use super::{Bvh, BvhError};
+use super::Bvh;
+use crate::ModelError;
 use crate::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use crate::rotation::{normalize_or_identity, rotation_between, twist_angle};
 
@@ -202,13 +203,13 @@ pub fn retarget(
     bvh: &Bvh,
     skeleton: &Skeleton,
     options: &RetargetOptions,
-) -> Result<Retargeted, BvhError> {
+) -> Result<Retargeted, ModelError> {
     bvh.validate()?;
     let axes = options.axes;
     let orthogonal = (axes * axes.transpose()).abs_diff_eq(Mat3::IDENTITY, 1e-4)
         && (axes.determinant().abs() - 1.0).abs() < 1e-4;
     if !orthogonal {
-        return Err(BvhError::Invalid(format!(
+        return Err(ModelError::BvhInvalid(format!(
             "axes {axes} are not an orthogonal map"
         )));
     }
@@ -235,7 +236,7 @@ pub fn retarget(
     }
     if source_joints[Joint::Hips.index()].is_none() {
         let names: Vec<&str> = bvh.joints.iter().map(|j| j.name.as_str()).collect();
-        return Err(BvhError::Invalid(format!(
+        return Err(ModelError::BvhInvalid(format!(
             "no joint drives Hips (joints: {})",
             names.join(", ")
         )));
@@ -258,7 +259,7 @@ pub fn retarget(
             Some(above) if ours != above && is_ancestor_or_self(above, ours) => {}
             None if ours == Joint::Hips => {}
             other => {
-                return Err(BvhError::Invalid(format!(
+                return Err(ModelError::BvhInvalid(format!(
                     "joint {:?} drives {ours} but its nearest mapped ancestor drives {}",
                     bvh.joints[i].name,
                     other.map_or("nothing".to_owned(), |j| j.to_string()),
@@ -308,7 +309,7 @@ pub fn retarget(
         (metres_per_unit, our_size - source_size * metres_per_unit)
     };
     if !(root_scale.is_finite() && root_scale > 0.0 && root_shift.is_finite()) {
-        return Err(BvhError::Invalid(format!(
+        return Err(ModelError::BvhInvalid(format!(
             "cannot scale the root: source size {source_size}, ours {our_size}"
         )));
     }
@@ -345,7 +346,7 @@ pub fn retarget(
         let hips = axes * positions[hips_source];
         pose.root_position = hips * root_scale + Vec3::new(0.0, root_shift, 0.0);
         if !pose.is_finite() {
-            return Err(BvhError::Invalid(format!(
+            return Err(ModelError::BvhInvalid(format!(
                 "frame {frame} gives a non-finite pose (values too large?)"
             )));
         }

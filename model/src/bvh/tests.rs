@@ -280,12 +280,12 @@ fn malformed_input_gives_line_numbers() {
     ];
     for (text, line, fragment) in cases {
         match Bvh::parse(&text) {
-            Err(BvhError::Syntax { line: l, message }) => {
+            Err(ModelError::BvhSyntax { line: l, message }) => {
                 assert!(
                     l == line && message.contains(fragment),
                     "expected line {line} with {fragment:?}, got line {l}: {message}\n{text}"
                 );
-                let shown = BvhError::Syntax { line: l, message }.to_string();
+                let shown = ModelError::BvhSyntax { line: l, message }.to_string();
                 assert!(shown.starts_with(&format!("line {line}: ")), "{shown}");
             }
             other => panic!("expected a syntax error at line {line} ({fragment}), got {other:?}"),

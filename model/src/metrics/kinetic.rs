@@ -1,6 +1,7 @@
 //! fairmotion's kinetic features as AIST++ computes them, and FACT's FID_k / Dist_k.
 
-use super::{JointTrack, MetricsError, frechet::frechet_distance};
+use super::{JointTrack, frechet::frechet_distance};
+use crate::ModelError;
 
 /// Half-width in seconds of the window velocities and accelerations are averaged over.
 ///
@@ -30,10 +31,10 @@ fn window_frames(fps: f64) -> usize {
 /// the frame-to-frame velocities / second differences within [`KINETIC_WINDOW_S`] of it that
 /// exist (windows shrink at the ends exactly as fairmotion's do), and the means divide by
 /// `n − 1`. With 24 SMPL joints this is FACT's 72-d feature. Needs at least three frames.
-pub fn kinetic_features(track: &JointTrack<'_>) -> Result<Vec<f64>, MetricsError> {
+pub fn kinetic_features(track: &JointTrack<'_>) -> Result<Vec<f64>, ModelError> {
     let n = track.frames();
     if n < 3 {
-        return Err(MetricsError::TooShort {
+        return Err(ModelError::TooShort {
             what: "frames",
             needed: 3,
             found: n,
@@ -77,7 +78,7 @@ pub struct FeatureNormaliser {
 impl FeatureNormaliser {
     /// Mean and population standard deviation (`np.std`, `ddof=0`) + [`FEATURE_STD_EPSILON`]
     /// of each feature over `reference` (at least one sample of equal, finite dimension).
-    pub fn fit(reference: &[Vec<f64>]) -> Result<Self, MetricsError> {
+    pub fn fit(reference: &[Vec<f64>]) -> Result<Self, ModelError> {
         let dim = check_set(reference, 1)?;
         let n = reference.len() as f64;
         let mut mean = vec![0.0; dim];
@@ -100,9 +101,9 @@ impl FeatureNormaliser {
     }
 
     /// `(x − mean) / std` for one feature vector.
-    pub fn apply(&self, x: &[f64]) -> Result<Vec<f64>, MetricsError> {
+    pub fn apply(&self, x: &[f64]) -> Result<Vec<f64>, ModelError> {
         if x.len() != self.mean.len() {
-            return Err(MetricsError::DimensionMismatch {
+            return Err(ModelError::DimensionMismatch {
                 expected: self.mean.len(),
                 found: x.len(),
             });
@@ -115,15 +116,15 @@ impl FeatureNormaliser {
     }
 
     /// [`apply`](Self::apply) to every sample of a set.
-    pub fn apply_all(&self, set: &[Vec<f64>]) -> Result<Vec<Vec<f64>>, MetricsError> {
+    pub fn apply_all(&self, set: &[Vec<f64>]) -> Result<Vec<Vec<f64>>, ModelError> {
         set.iter().map(|x| self.apply(x)).collect()
     }
 }
 
 /// Common dimension of a set with at least `needed` samples, all finite.
-fn check_set(set: &[Vec<f64>], needed: usize) -> Result<usize, MetricsError> {
+fn check_set(set: &[Vec<f64>], needed: usize) -> Result<usize, ModelError> {
     if set.len() < needed {
-        return Err(MetricsError::TooShort {
+        return Err(ModelError::TooShort {
             what: "samples",
             needed,
             found: set.len(),
@@ -132,13 +133,13 @@ fn check_set(set: &[Vec<f64>], needed: usize) -> Result<usize, MetricsError> {
     let dim = set.first().map_or(0, Vec::len);
     for (sample, r) in set.iter().enumerate() {
         if r.len() != dim {
-            return Err(MetricsError::DimensionMismatch {
+            return Err(ModelError::DimensionMismatch {
                 expected: dim,
                 found: r.len(),
             });
         }
         if let Some(d) = r.iter().position(|v| !v.is_finite()) {
-            return Err(MetricsError::NonFiniteFeature { sample, dim: d });
+            return Err(ModelError::NonFiniteFeature { sample, dim: d });
         }
     }
     Ok(dim)
@@ -150,20 +151,20 @@ fn check_set(set: &[Vec<f64>], needed: usize) -> Result<usize, MetricsError> {
 /// real set only ([`FeatureNormaliser`]), then [`frechet_distance`] (unbiased covariances).
 /// Feed it [`kinetic_features`] for FID_k; it serves FID_g on geometric features just as well.
 /// Each set needs two samples or more.
-pub fn fid_k(real: &[Vec<f64>], generated: &[Vec<f64>]) -> Result<f64, MetricsError> {
+pub fn fid_k(real: &[Vec<f64>], generated: &[Vec<f64>]) -> Result<f64, ModelError> {
     let norm = FeatureNormaliser::fit(real)?;
     frechet_distance(&norm.apply_all(real)?, &norm.apply_all(generated)?)
 }
 
 /// FACT's Dist_k: [`mean_pairwise_distance`] of `generated` after standardising it by `real`'s
 /// statistics, as mint's `calculate_frechet_feature_distance` computes its `avg_dist`.
-pub fn dist_k(real: &[Vec<f64>], generated: &[Vec<f64>]) -> Result<f64, MetricsError> {
+pub fn dist_k(real: &[Vec<f64>], generated: &[Vec<f64>]) -> Result<f64, ModelError> {
     let norm = FeatureNormaliser::fit(real)?;
     mean_pairwise_distance(&norm.apply_all(generated)?)
 }
 
 /// Mean Euclidean distance over all unordered pairs of samples (diversity); needs two or more.
-pub fn mean_pairwise_distance(set: &[Vec<f64>]) -> Result<f64, MetricsError> {
+pub fn mean_pairwise_distance(set: &[Vec<f64>]) -> Result<f64, ModelError> {
     check_set(set, 2)?;
     let mut total = 0.0;
     for (i, a) in set.iter().enumerate() {

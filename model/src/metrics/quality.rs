@@ -1,6 +1,7 @@
 //! Artefact detectors of our own: frozen stretches and foot skating.
 
-use super::{JointTrack, MetricsError};
+use super::JointTrack;
+use crate::ModelError;
 
 /// How [`detect_freezes`] decides that the dancer has stopped.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,15 +53,15 @@ pub struct FreezeReport {
 pub fn detect_freezes(
     track: &JointTrack<'_>,
     params: FreezeParams,
-) -> Result<FreezeReport, MetricsError> {
+) -> Result<FreezeReport, ModelError> {
     if !(params.window_s.is_finite() && params.window_s > 0.0) {
-        return Err(MetricsError::BadParameter {
+        return Err(ModelError::BadParameter {
             name: "window_s",
             value: params.window_s,
         });
     }
     if !(params.speed_floor_mps.is_finite() && params.speed_floor_mps >= 0.0) {
-        return Err(MetricsError::BadParameter {
+        return Err(ModelError::BadParameter {
             name: "speed_floor_mps",
             value: params.speed_floor_mps,
         });
@@ -109,7 +110,7 @@ pub fn detect_freezes(
 /// Where the floor is for [`foot_skating`] when a capture does not say: the 5th percentile of
 /// the toes' heights over the whole track (captures put the floor anywhere; a few frames of
 /// noise below it must not count), in metres; 0 for an empty track.
-pub fn toe_floor_y(track: &JointTrack<'_>, toe_joints: &[usize]) -> Result<f64, MetricsError> {
+pub fn toe_floor_y(track: &JointTrack<'_>, toe_joints: &[usize]) -> Result<f64, ModelError> {
     for &toe in toe_joints {
         track.check_joint(toe)?;
     }
@@ -169,7 +170,7 @@ pub fn foot_skating(
     track: &JointTrack<'_>,
     toe_joints: &[usize],
     params: ContactParams,
-) -> Result<FootSkating, MetricsError> {
+) -> Result<FootSkating, ModelError> {
     for &toe in toe_joints {
         track.check_joint(toe)?;
     }
@@ -179,7 +180,7 @@ pub fn foot_skating(
         ("max_vertical_speed_mps", params.max_vertical_speed_mps),
     ] {
         if !value.is_finite() {
-            return Err(MetricsError::BadParameter { name, value });
+            return Err(ModelError::BadParameter { name, value });
         }
     }
     let n = track.frames();

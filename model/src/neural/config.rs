@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::ModelError;
 use crate::motion::MOTION_FEATURE_DIM;
 use crate::neural::token::{KEY_CONDITION_DIM, TOKEN_DIM};
 
@@ -156,19 +157,21 @@ impl NetConfig {
         TOKEN_DIM
     }
 
-    /// Why this configuration cannot build a network, if it cannot.
-    pub fn check(&self) -> Result<(), String> {
+    /// Why this configuration cannot build a network, if it cannot ([`ModelError::BadNetConfig`]).
+    pub fn check(&self) -> Result<(), ModelError> {
         if self.d_model == 0 || self.heads == 0 || self.layers == 0 || self.window == 0 {
-            return Err("zero-sized network".into());
+            return Err(ModelError::BadNetConfig("zero-sized network".into()));
         }
         if !self.d_model.is_multiple_of(self.heads) || !self.head_dim().is_multiple_of(2) {
-            return Err(format!(
+            return Err(ModelError::BadNetConfig(format!(
                 "d_model {} is not an even head size times {} heads",
                 self.d_model, self.heads
-            ));
+            )));
         }
         if self.flow_steps == 0 || self.flow_hidden == 0 || self.ff == 0 {
-            return Err("zero-sized flow or feed-forward".into());
+            return Err(ModelError::BadNetConfig(
+                "zero-sized flow or feed-forward".into(),
+            ));
         }
         if self.window > 4096
             || self.d_model > 4096
@@ -176,7 +179,7 @@ impl NetConfig {
             || self.lookahead > 250
             || self.styles > 64
         {
-            return Err("implausibly large network".into());
+            return Err(ModelError::BadNetConfig("implausibly large network".into()));
         }
         Ok(())
     }

@@ -12,13 +12,14 @@
 
 use dsp::feature::{FEATURE_DIM, FeatureLayout};
 
+use crate::ModelError;
 use crate::foot_lock::{self, FootLock};
 use crate::key_overlay::KeyOverlay;
 use crate::motion::{
     MOTION_FEATURE_DIM, MotionDecoder, ROOT_DFACING, ROOT_DX, ROOT_DZ, ROTATION_DIM, ROTATIONS,
     RootState,
 };
-use crate::neural::file::{FRAME_RATE, ModelFileError, NeuralModel};
+use crate::neural::file::{FRAME_RATE, NeuralModel};
 use crate::neural::rng::Rng;
 use crate::neural::runtime::Runtime;
 use crate::neural::safety::{SafetyCounts, SafetyNets};
@@ -133,7 +134,7 @@ pub struct NeuralDancer {
 
 impl NeuralDancer {
     /// A dancer running `model` (validated already if it came from [`NeuralModel::load`]).
-    pub fn new(model: &NeuralModel) -> Result<Self, ModelFileError> {
+    pub fn new(model: &NeuralModel) -> Result<Self, ModelError> {
         let runtime = Runtime::new(&model.tensors, &model.config)?;
         let norm = model.normalizer()?;
         let (motion, music) = model.seed_clip()?;

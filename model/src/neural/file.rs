@@ -1,23 +1,20 @@
 //! The model file: magic, format version, JSON metadata (frame rate, look-ahead, feature
 //! layouts, rig, network sizes, training summary, tensor list), the tensors as little-endian
 //! f32, and a CRC-32 over everything before it. Loading validates all of it and returns a
-//! [`ModelFileError`], never panics; saving writes a temporary file and renames it over the
+//! [`ModelError`], never panics; saving writes a temporary file and renames it over the
 //! target, so a crash never leaves a half-written model.
 
 use std::io::Write;
 use std::path::Path;
 
-use serde::{Deserialize, Serialize};
-use thiserror::Error;
-
+use crate::ModelError;
 use crate::motion::{MOTION_FEATURE_DIM, MOTION_LAYOUT_VERSION};
 use crate::neural::config::NetConfig;
-use crate::neural::tensors::{
-    NamedTensors, POSE_MAX, POSE_MIN, SEED_MOTION, SEED_MUSIC, Tensor, WeightError,
-};
+use crate::neural::tensors::{NamedTensors, POSE_MAX, POSE_MIN, SEED_MOTION, SEED_MUSIC, Tensor};
 use crate::neural::token::Normalizer;
 use crate::rig::JOINT_COUNT;
 use dsp::feature::{FEATURE_DIM, FEATURE_LAYOUT_VERSION};
+use serde::{Deserialize, Serialize};
 
 /// First bytes of every model file.
 pub const MAGIC: &[u8; 8] = b"DANCEDNN";
@@ -25,38 +22,6 @@ pub const MAGIC: &[u8; 8] = b"DANCEDNN";
 pub const FORMAT_VERSION: u32 = 2;
 /// Frames per second every model here runs at.
 pub const FRAME_RATE: f64 = 25.0;
-
-/// What went wrong reading or writing a model file.
-#[derive(Debug, Error)]
-pub enum ModelFileError {
-    /// Reading or writing failed.
-    #[error("model file I/O: {0}")]
-    Io(#[from] std::io::Error),
-    /// The file does not start with the model magic.
-    #[error("not a danced model file (bad magic)")]
-    BadMagic,
-    /// The file ends early.
-    #[error("model file is truncated")]
-    Truncated,
-    /// The checksum does not match the content.
-    #[error("model file is corrupted (checksum mismatch)")]
-    Checksum,
-    /// A format version this build cannot read.
-    #[error("model file format version {found}, this build reads {FORMAT_VERSION}")]
-    Version {
-        /// Version in the file.
-        found: u32,
-    },
-    /// The metadata is not valid JSON of the expected shape.
-    #[error("model metadata: {0}")]
-    Metadata(String),
-    /// The model was made for different features, rig or rate.
-    #[error("model mismatch: {0}")]
-    Mismatch(String),
-    /// A weight is missing, mis-shaped or not finite.
-    #[error(transparent)]
-    Weight(#[from] WeightError),
-}
 
 /// What the model was trained on, for the record.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -130,9 +95,9 @@ pub struct NeuralModel {
     pub training: TrainingSummary,
 }
 
-fn take<'a>(bytes: &mut &'a [u8], n: usize) -> Result<&'a [u8], ModelFileError> {
+fn take<'a>(bytes: &mut &'a [u8], n: usize) -> Result<&'a [u8], ModelError> {
     if bytes.len() < n {
-        return Err(ModelFileError::Truncated);
+        return Err(ModelError::ModelFileTruncated);
     }
     let (head, tail) = bytes.split_at(n);
     *bytes = tail;
@@ -157,7 +122,7 @@ impl NeuralModel {
     /// The seed clip ("motion prompt"): raw motion features of `window` frames and, row for
     /// row, the raw music frame each of them was heard with `lookahead` frames earlier (the
     /// music their token carries).
-    pub fn seed_clip(&self) -> Result<(&[f32], &[f32]), WeightError> {
+    pub fn seed_clip(&self) -> Result<(&[f32], &[f32]), ModelError> {
         let n = self.config.window;
         Ok((
             self.tensors.get(SEED_MOTION, &[n, MOTION_FEATURE_DIM])?,
@@ -189,7 +154,7 @@ impl NeuralModel {
     }
 
     /// The range of every raw pose feature in the training data (lowest, highest).
-    pub fn pose_range(&self) -> Result<(&[f32], &[f32]), WeightError> {
+    pub fn pose_range(&self) -> Result<(&[f32], &[f32]), ModelError> {
         Ok((
             self.tensors.get(POSE_MIN, &[MOTION_FEATURE_DIM])?,
             self.tensors.get(POSE_MAX, &[MOTION_FEATURE_DIM])?,
@@ -224,7 +189,7 @@ impl NeuralModel {
     }
 
     /// Normalisation statistics stored in the weights.
-    pub fn normalizer(&self) -> Result<Normalizer, WeightError> {
+    pub fn normalizer(&self) -> Result<Normalizer, ModelError> {
         let t = &self.tensors;
         Ok(Normalizer {
             pose_mean: t.get("norm.pose_mean", &[MOTION_FEATURE_DIM])?.to_vec(),
@@ -281,27 +246,27 @@ impl NeuralModel {
     }
 
     /// Parses and validates a model file's bytes.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelFileError> {
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelError> {
         if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
-            return Err(ModelFileError::BadMagic);
+            return Err(ModelError::ModelFileBadMagic);
         }
         let mut rest = &bytes[MAGIC.len()..];
         let version = u32::from_le_bytes(take(&mut rest, 4)?.try_into().unwrap_or_default());
         if version != FORMAT_VERSION {
-            return Err(ModelFileError::Version { found: version });
+            return Err(ModelError::ModelFileVersion { found: version });
         }
         let json_len = u64::from_le_bytes(take(&mut rest, 8)?.try_into().unwrap_or_default());
-        let json_len = usize::try_from(json_len).map_err(|_| ModelFileError::Truncated)?;
+        let json_len = usize::try_from(json_len).map_err(|_| ModelError::ModelFileTruncated)?;
         let json = take(&mut rest, json_len)?;
         if bytes.len() < 4 {
-            return Err(ModelFileError::Truncated);
+            return Err(ModelError::ModelFileTruncated);
         }
         let meta: ModelMeta = serde_json::from_slice(json).map_err(|e| {
             // A cut inside the JSON reads as a parse error; the checksum can tell which.
             if crc32(&bytes[..bytes.len() - 4]).to_le_bytes() != bytes[bytes.len() - 4..] {
-                ModelFileError::Checksum
+                ModelError::ModelFileChecksum
             } else {
-                ModelFileError::Metadata(e.to_string())
+                ModelError::ModelFileMetadata(e.to_string())
             }
         })?;
         let payload: usize = meta
@@ -311,22 +276,22 @@ impl NeuralModel {
             .try_fold(0usize, |a, n| {
                 n.and_then(|n| a.checked_add(n.checked_mul(4)?))
             })
-            .ok_or_else(|| ModelFileError::Metadata("tensor sizes overflow".into()))?;
+            .ok_or_else(|| ModelError::ModelFileMetadata("tensor sizes overflow".into()))?;
         if rest.len() < payload + 4 {
-            return Err(ModelFileError::Truncated);
+            return Err(ModelError::ModelFileTruncated);
         }
         if rest.len() > payload + 4 {
-            return Err(ModelFileError::Checksum);
+            return Err(ModelError::ModelFileChecksum);
         }
         let body = &bytes[..bytes.len() - 4];
         if crc32(body).to_le_bytes() != bytes[bytes.len() - 4..] {
-            return Err(ModelFileError::Checksum);
+            return Err(ModelError::ModelFileChecksum);
         }
         let expect = |what: &str, found: String, want: String| {
             if found == want {
                 Ok(())
             } else {
-                Err(ModelFileError::Mismatch(format!(
+                Err(ModelError::ModelFileMismatch(format!(
                     "{what} is {found}, this build needs {want}"
                 )))
             }
@@ -351,9 +316,10 @@ impl NeuralModel {
             meta.lookahead_frames.to_string(),
             meta.config.lookahead.to_string(),
         )?;
-        meta.config.check().map_err(ModelFileError::Mismatch)?;
-        crate::neural::music_layout::readable(meta.music_layout_version, meta.music_dim)
-            .map_err(ModelFileError::Mismatch)?;
+        meta.config
+            .check()
+            .map_err(|e| ModelError::ModelFileMismatch(e.to_string()))?;
+        crate::neural::music_layout::readable(meta.music_layout_version, meta.music_dim)?;
         let mut tensors = NamedTensors::default();
         for (name, shape) in &meta.tensors {
             let n: usize = shape.iter().product();
@@ -374,8 +340,7 @@ impl NeuralModel {
             &mut tensors,
             meta.music_layout_version,
             meta.music_dim,
-        )
-        .map_err(ModelFileError::Mismatch)?;
+        )?;
         let mut model = NeuralModel {
             config: meta.config,
             tensors,
@@ -398,7 +363,7 @@ impl NeuralModel {
             .zip(hi)
             .any(|(l, h)| l.partial_cmp(h).is_none_or(|o| o.is_gt()))
         {
-            return Err(ModelFileError::Metadata(
+            return Err(ModelError::ModelFileMetadata(
                 "pose range: a lowest value above its highest".into(),
             ));
         }
@@ -406,7 +371,7 @@ impl NeuralModel {
     }
 
     /// Writes the model atomically (temporary file in the same folder, then rename).
-    pub fn save(&self, path: &Path) -> Result<(), ModelFileError> {
+    pub fn save(&self, path: &Path) -> Result<(), ModelError> {
         let bytes = self.to_bytes();
         let dir = path
             .parent()
@@ -430,7 +395,7 @@ impl NeuralModel {
     }
 
     /// Reads and validates a model file.
-    pub fn load(path: &Path) -> Result<Self, ModelFileError> {
+    pub fn load(path: &Path) -> Result<Self, ModelError> {
         Self::from_bytes(&std::fs::read(path)?)
     }
 }
@@ -471,7 +436,9 @@ mod tests {
             assert!(
                 matches!(
                     e,
-                    ModelFileError::Truncated | ModelFileError::BadMagic | ModelFileError::Checksum
+                    ModelError::ModelFileTruncated
+                        | ModelError::ModelFileBadMagic
+                        | ModelError::ModelFileChecksum
                 ),
                 "cut at {cut}: {e}"
             );
@@ -481,13 +448,13 @@ mod tests {
         flipped[i] ^= 0x40;
         assert!(matches!(
             NeuralModel::from_bytes(&flipped),
-            Err(ModelFileError::Checksum)
+            Err(ModelError::ModelFileChecksum)
         ));
         let mut version = bytes.clone();
         version[8] = 9;
         assert!(matches!(
             NeuralModel::from_bytes(&version),
-            Err(ModelFileError::Version { found: 9 })
+            Err(ModelError::ModelFileVersion { found: 9 })
         ));
         // A different rig: rewrite the metadata and fix the checksum so only the mismatch remains.
         let pattern = b"\"joint_count\":22";

@@ -6,23 +6,25 @@
 
 use dsp::feature::{FEATURE_DIM, FEATURE_DIM_V1, FEATURE_LAYOUT_VERSION};
 
+use crate::ModelError;
 use crate::neural::tensors::{NamedTensors, SEED_MUSIC};
 use crate::neural::token::MUSIC_AT;
 
 /// Whether this build reads a model trained on music layout `version` with `dim` features
-/// (its own, or one [`upgrade`] widens), said before any of the file's weights are read.
-pub fn readable(version: u32, dim: usize) -> Result<(), String> {
+/// (its own, or one [`upgrade`] widens), said before any of the file's weights are read; Err is
+/// a [`ModelError::ModelFileMismatch`].
+pub fn readable(version: u32, dim: usize) -> Result<(), ModelError> {
     match (version, dim) {
         (FEATURE_LAYOUT_VERSION, FEATURE_DIM) | (1, FEATURE_DIM_V1) => Ok(()),
-        _ => Err(format!(
+        _ => Err(ModelError::ModelFileMismatch(format!(
             "music layout is v{version} × {dim}, this build reads v1 × {FEATURE_DIM_V1} and v{FEATURE_LAYOUT_VERSION} × {FEATURE_DIM}"
-        )),
+        ))),
     }
 }
 
 /// Widens the tensors of a model trained on music layout `version` (`dim` values a frame) to
-/// the current layout; Err names what does not fit.
-pub fn upgrade(tensors: &mut NamedTensors, version: u32, dim: usize) -> Result<(), String> {
+/// the current layout; Err ([`ModelError::ModelFileMismatch`]) names what does not fit.
+pub fn upgrade(tensors: &mut NamedTensors, version: u32, dim: usize) -> Result<(), ModelError> {
     readable(version, dim)?;
     if version == FEATURE_LAYOUT_VERSION && dim == FEATURE_DIM {
         return Ok(());

@@ -4,9 +4,10 @@
 //! [`Runtime::sample`] never allocate, so they can run on a real-time thread, and each costs
 //! O(window · d_model) per layer, not a re-encode of the window.
 
+use crate::ModelError;
 use crate::neural::config::{COUPLING_SCALE_OFFSET, LN_EPS, NetConfig, rope_frequency};
 use crate::neural::lu;
-use crate::neural::tensors::{NamedTensors, STYLE_EMBEDDING, WeightError};
+use crate::neural::tensors::{NamedTensors, STYLE_EMBEDDING};
 use crate::neural::token::{FLAG_AT, LEVEL_AT, key_condition};
 
 #[derive(Clone)]
@@ -16,7 +17,7 @@ struct Dense {
 }
 
 impl Dense {
-    fn load(t: &NamedTensors, name: &str, i: usize, o: usize) -> Result<Self, WeightError> {
+    fn load(t: &NamedTensors, name: &str, i: usize, o: usize) -> Result<Self, ModelError> {
         Ok(Dense {
             w: t.get(&format!("{name}.w"), &[i, o])?.to_vec(),
             b: t.get(&format!("{name}.b"), &[o])?.to_vec(),
@@ -44,7 +45,7 @@ struct Norm {
 }
 
 impl Norm {
-    fn load(t: &NamedTensors, name: &str, d: usize) -> Result<Self, WeightError> {
+    fn load(t: &NamedTensors, name: &str, d: usize) -> Result<Self, ModelError> {
         Ok(Norm {
             g: t.get(&format!("{name}.g"), &[d])?.to_vec(),
             b: t.get(&format!("{name}.b"), &[d])?.to_vec(),
@@ -124,9 +125,9 @@ pub struct Runtime {
 
 impl Runtime {
     /// Builds the runtime from named tensors (the flow's linear maps are inverted here).
-    pub fn new(t: &NamedTensors, c: &NetConfig) -> Result<Self, WeightError> {
+    pub fn new(t: &NamedTensors, c: &NetConfig) -> Result<Self, ModelError> {
         c.check()
-            .map_err(|e| WeightError::Missing(format!("(bad config: {e})")))?;
+            .map_err(|e| ModelError::WeightMissing(format!("(bad config: {e})")))?;
         let d = c.d_model;
         let f = c.flow();
         let blocks = (0..c.layers)
@@ -143,7 +144,7 @@ impl Runtime {
                     values: vec![0.0; c.window * d],
                 })
             })
-            .collect::<Result<_, WeightError>>()?;
+            .collect::<Result<_, ModelError>>()?;
         let steps = (0..f.steps)
             .map(|k| {
                 let p = format!("flow.{k}");
@@ -156,7 +157,7 @@ impl Runtime {
                     t.get(&format!("{p}.log_s"), &[n])?,
                 );
                 let w_inv = lu::inverse(&w, n)
-                    .ok_or_else(|| WeightError::NotFinite(format!("{p} (singular)")))?;
+                    .ok_or_else(|| ModelError::WeightNotFinite(format!("{p} (singular)")))?;
                 Ok(FlowStep {
                     an_bias: t.get(&format!("{p}.an_bias"), &[n])?.to_vec(),
                     an_inv_scale: t
@@ -169,7 +170,7 @@ impl Runtime {
                     c2: Dense::load(t, &format!("{p}.c2"), f.hidden, 2 * f.rest())?,
                 })
             })
-            .collect::<Result<_, WeightError>>()?;
+            .collect::<Result<_, ModelError>>()?;
         let half = c.head_dim() / 2;
         Ok(Runtime {
             config: *c,

@@ -3,8 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use thiserror::Error;
-
+use crate::ModelError;
 use crate::neural::config::{FlowConfig, NetConfig};
 use crate::neural::rng::Rng;
 
@@ -28,30 +27,6 @@ pub struct Tensor {
     pub data: Vec<f32>,
 }
 
-/// A weight that is missing or has the wrong shape.
-#[derive(Debug, Error, PartialEq)]
-pub enum WeightError {
-    /// The weight set lacks a tensor the network needs.
-    #[error("weight `{0}` is missing")]
-    Missing(String),
-    /// A tensor's shape is not the one the configuration implies.
-    #[error("weight `{name}` has shape {found:?}, expected {expected:?}")]
-    Shape {
-        /// Tensor name.
-        name: String,
-        /// Shape found.
-        found: Vec<usize>,
-        /// Shape expected.
-        expected: Vec<usize>,
-    },
-    /// A value is NaN or infinite.
-    #[error("weight `{0}` holds a non-finite value")]
-    NotFinite(String),
-    /// A permutation tensor is not a permutation.
-    #[error("weight `{0}` is not a permutation")]
-    NotPermutation(String),
-}
-
 /// Weight tensors by name.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct NamedTensors {
@@ -73,33 +48,33 @@ impl NamedTensors {
     }
 
     /// The values of `name`, checked to have `shape` and finite values.
-    pub fn get(&self, name: &str, shape: &[usize]) -> Result<&[f32], WeightError> {
+    pub fn get(&self, name: &str, shape: &[usize]) -> Result<&[f32], ModelError> {
         let t = self
             .map
             .get(name)
-            .ok_or_else(|| WeightError::Missing(name.into()))?;
+            .ok_or_else(|| ModelError::WeightMissing(name.into()))?;
         if t.shape != shape || t.data.len() != shape.iter().product::<usize>() {
-            return Err(WeightError::Shape {
+            return Err(ModelError::WeightShape {
                 name: name.into(),
                 found: t.shape.clone(),
                 expected: shape.to_vec(),
             });
         }
         if t.data.iter().any(|v| !v.is_finite()) {
-            return Err(WeightError::NotFinite(name.into()));
+            return Err(ModelError::WeightNotFinite(name.into()));
         }
         Ok(&t.data)
     }
 
     /// A permutation of `0..n` stored as floats under `name`.
-    pub fn permutation(&self, name: &str, n: usize) -> Result<Vec<usize>, WeightError> {
+    pub fn permutation(&self, name: &str, n: usize) -> Result<Vec<usize>, ModelError> {
         let raw = self.get(name, &[n])?;
         let mut seen = vec![false; n];
         let mut p = Vec::with_capacity(n);
         for &v in raw {
             let i = v as usize;
             if v < 0.0 || v.fract() != 0.0 || i >= n || seen[i] {
-                return Err(WeightError::NotPermutation(name.into()));
+                return Err(ModelError::WeightNotPermutation(name.into()));
             }
             seen[i] = true;
             p.push(i);

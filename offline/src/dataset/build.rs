@@ -373,7 +373,7 @@ pub fn build_all_augmented(
     bar: bool,
 ) -> Result<BuiltDances, OfflineError> {
     let dances = dances_with_split(data).map_err(|e| match e {
-        OfflineError::DataSet(source) => OfflineError::DataSetFolder {
+        OfflineError::Model(source) => OfflineError::DataSetFolder {
             path: data.join("tang2018"),
             source,
         },
