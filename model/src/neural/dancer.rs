@@ -617,7 +617,7 @@ mod tests {
     use super::*;
     use crate::neural::config::NetConfig;
     use crate::neural::file::TrainingSummary;
-    use crate::neural::tensors::{STYLE_EMBEDDING, init_net};
+    use crate::neural::tensors::init_net;
     use crate::source::KeyPoseTarget;
     use glam::Quat;
 
@@ -782,15 +782,6 @@ mod tests {
         let (_, network) = run(&mut set_up, usize::MAX);
         assert_eq!(from_start, network);
         assert_ne!(from_start, live);
-    }
-
-    /// Summed angle between two runs' joint rotations, radians.
-    fn rotation_gap(a: &[Pose], b: &[Pose]) -> f32 {
-        a.iter()
-            .zip(b)
-            .flat_map(|(p, q)| p.local_rotations.iter().zip(&q.local_rotations))
-            .map(|(r, s)| r.angle_between(*s))
-            .sum()
     }
 
     #[test]
