@@ -865,9 +865,8 @@ pub fn fit_dance(dance: &TangDance) -> Result<TangFit, ModelError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tang2018::{dance_dirs, load_dance};
+    use crate::tang2018::load_dance;
     use std::path::PathBuf;
-    use std::time::Instant;
 
     fn truth_lengths() -> Lengths {
         Lengths {
@@ -1314,59 +1313,6 @@ mod tests {
                     yaw.to_degrees()
                 );
             }
-        }
-    }
-
-    /// The measurement over the whole data set:
-    /// `cargo test -p model --release tang_fit::tests::fit_all -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn fit_all() {
-        let Some(root) = data_root() else { return };
-        let start = Instant::now();
-        let mut rows = Vec::new();
-        let mut frames = 0;
-        let mut per_joint = [0.0; JOINT_COUNT];
-        for dir in dance_dirs(&root).unwrap() {
-            let dance = load_dance(&dir).unwrap();
-            let t = Instant::now();
-            let fit = fit_dance(&dance).unwrap();
-            frames += dance.frames();
-            for (a, b) in per_joint.iter_mut().zip(fit.per_joint_error_cm) {
-                *a += b * dance.frames() as f64;
-            }
-            rows.push((
-                dance.name.clone(),
-                fit.mean_error_cm,
-                fit.bone_length_spread,
-                dance.frames(),
-                t.elapsed(),
-            ));
-        }
-        let total = start.elapsed();
-        println!("dance        frames  error_cm  spread  time_ms");
-        for (name, e, s, n, t) in &rows {
-            println!(
-                "{name:12} {n:6}  {e:8.2}  {s:6.3}  {:7.1}",
-                t.as_secs_f64() * 1e3
-            );
-        }
-        let mut errors: Vec<f32> = rows.iter().map(|r| r.1 as f32).collect();
-        errors.sort_by(f32::total_cmp);
-        println!(
-            "{} dances, {frames} frames: median error {:.2} cm, worst {:.2} cm, total {:.2} s (loading included)",
-            rows.len(),
-            quantile(&errors, 0.5),
-            errors.last().unwrap(),
-            total.as_secs_f64()
-        );
-        println!("per joint, frame-weighted mean over the data set (cm):");
-        for j in MAPPED_JOINTS {
-            println!(
-                "  {:14} {:.2}",
-                j.name(),
-                per_joint[j.index()] / frames as f64
-            );
         }
     }
 }
