@@ -221,6 +221,31 @@ fn the_old_train_commands_name_their_new_home() {
 }
 
 #[test]
+fn a_style_the_dancer_cannot_honour_is_refused_at_start() {
+    // The shipped model has no style input, and the retrieval dancer none either.
+    for source in ["neural", "retrieval"] {
+        let out = danced()
+            .args([
+                "demo",
+                "--duration",
+                "1",
+                "--style",
+                "rumba",
+                "--source",
+                source,
+            ])
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{source}: a refused style ran");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains("style rumba: the loaded dancer has no style input"),
+            "{source}: {stderr}"
+        );
+    }
+}
+
+#[test]
 fn live_run_on_a_file_writes_stats_and_a_bad_config_names_the_key() {
     let dir = scratch("live");
     let wav = dir.join("clicks.wav");
