@@ -7,8 +7,6 @@ pub enum TrainingErrorKind {
     /// A recipe file cannot be read, is not valid TOML, or names an unknown or out-of-range
     /// setting.
     Recipe,
-    /// The data to train on cannot be loaded or is too short for the recipe.
-    Data,
 }
 
 /// An error of training, with its kind and a message that names the file or setting.
@@ -26,14 +24,6 @@ impl TrainingError {
     pub fn recipe(message: impl Into<String>) -> Self {
         Self {
             kind: TrainingErrorKind::Recipe,
-            message: message.into(),
-        }
-    }
-
-    /// A data error.
-    pub fn data(message: impl Into<String>) -> Self {
-        Self {
-            kind: TrainingErrorKind::Data,
             message: message.into(),
         }
     }

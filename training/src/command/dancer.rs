@@ -187,6 +187,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     );
     let mut data_hash = Sha256::new();
     let mut model: Option<NeuralModel> = None;
+    let mut retimed: Option<(f64, Vec<BuiltDance>)> = None;
     for (i, stage) in recipe.stages.iter().enumerate() {
         let steps = args.check.map_or(stage.steps, |c| stage.steps.min(c));
         eprintln!(
@@ -195,9 +196,9 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             recipe.stages.len(),
             stage.name
         );
-        let retimed: Vec<BuiltDance>;
-        let stage_dances: &[BuiltDance] = if stage.beat_retime > 0.0 {
-            retimed = dances
+        // Stages that retime alike (the shipped three all do) share one retimed copy.
+        if stage.beat_retime > 0.0 && retimed.as_ref().is_none_or(|r| r.0 != stage.beat_retime) {
+            let copy = dances
                 .iter()
                 .map(|d| {
                     if d.validation {
@@ -207,9 +208,11 @@ pub fn train(args: &TrainArgs) -> Result<()> {
                     }
                 })
                 .collect();
-            &retimed
-        } else {
-            &dances
+            retimed = Some((stage.beat_retime, copy));
+        }
+        let stage_dances: &[BuiltDance] = match &retimed {
+            Some((depth, copy)) if stage.beat_retime > 0.0 && *depth == stage.beat_retime => copy,
+            _ => &dances,
         };
         let training: Vec<&BuiltDance> = stage_dances.iter().filter(|d| !d.validation).collect();
         hash_frames(&mut data_hash, &training);
