@@ -109,7 +109,7 @@ impl Default for Controls {
 /// The live controls a source honours beyond those every source takes (temperature, key
 /// poses, seed, pause): the daemon refuses the others, counted, rather than pass on what
 /// would change nothing.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct SourceControls {
     /// [`Controls::style`]: a network with a style input.
     pub style: bool,

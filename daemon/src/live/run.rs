@@ -116,7 +116,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             rate_hz: config.output.rate_hz,
             model_rate_hz: source.frame_rate(),
             lead_ms: config.output.lead_ms,
-            controls: source.controls().into(),
+            controls: source.controls(),
             ..ViewHello::default()
         };
         let feed = LiveFeed {

@@ -28,28 +28,7 @@ pub struct ViewHello {
     pub frames: usize,
     /// The controls the dancer honours beyond those every dancer takes; the page hides the
     /// others (the daemon refuses them).
-    pub controls: HonouredControls,
-}
-
-/// [`model::source::SourceControls`] as the page reads it.
-#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq, Eq)]
-pub struct HonouredControls {
-    /// The style control.
-    pub style: bool,
-    /// The key-pose route control.
-    pub key_route: bool,
-    /// The beat-accent control.
-    pub beat_accent: bool,
-}
-
-impl From<model::source::SourceControls> for HonouredControls {
-    fn from(c: model::source::SourceControls) -> Self {
-        Self {
-            style: c.style,
-            key_route: c.key_route,
-            beat_accent: c.beat_accent,
-        }
-    }
+    pub controls: model::source::SourceControls,
 }
 
 /// The run as the HUD shows it.
