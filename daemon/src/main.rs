@@ -83,7 +83,7 @@ enum Command {
 
 #[derive(Subcommand, Debug)]
 enum BenchCommand {
-    /// Beat tracking accuracy and speed: native and aubio on synth-beats, tang2018, madmom-tests.
+    /// Beat tracking accuracy and speed: native and aubio on synth-beats, tang2018, real-music, madmom-tests.
     Beats(BenchBeatsArgs),
     /// The live pipeline at 1× on a replayed file: latency, jitter, CPU, memory, drops.
     Live(BenchLiveArgs),

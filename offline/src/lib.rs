@@ -15,5 +15,7 @@ pub mod error;
 pub mod files;
 pub mod pool;
 pub mod progress;
+pub mod real_music;
+pub mod recording_condition;
 
 pub use error::OfflineError;

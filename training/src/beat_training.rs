@@ -64,9 +64,6 @@ pub struct BeatTrainConfig {
     pub learning_rate: f64,
     /// Seed of crops and initial weights.
     pub seed: u64,
-    /// Standard deviation of the log gain drawn per sequence and band group for each input
-    /// (augmentation: real recordings balance their instruments unlike the rendered songs).
-    pub gain_jitter: f32,
 }
 
 impl Default for BeatTrainConfig {
@@ -80,7 +77,6 @@ impl Default for BeatTrainConfig {
             steps: 1500,
             learning_rate: 2e-3,
             seed: 1,
-            gain_jitter: 0.0,
         }
     }
 }
@@ -164,10 +160,19 @@ impl BeatNet {
     }
 }
 
-/// Per-input mean and standard deviation over every hop of `songs`.
-pub fn input_statistics(songs: &[BeatSong]) -> (Vec<f32>, Vec<f32>) {
+/// Songs drawn from together, with their share of the batches.
+#[derive(Clone, Debug, Default)]
+pub struct SongPool {
+    /// The songs.
+    pub songs: Vec<BeatSong>,
+    /// Relative share of batch sequences cut from these songs.
+    pub share: f64,
+}
+
+/// Per-input mean and standard deviation over every hop of the pools' songs.
+pub fn input_statistics(pools: &[SongPool]) -> (Vec<f32>, Vec<f32>) {
     let (mut sum, mut sq, mut n) = (vec![0.0f64; I], vec![0.0f64; I], 0usize);
-    for s in songs {
+    for s in pools.iter().flat_map(|p| &p.songs) {
         for row in s.inputs.chunks_exact(I) {
             for (j, &x) in row.iter().enumerate() {
                 sum[j] += x as f64;
@@ -186,27 +191,35 @@ pub fn input_statistics(songs: &[BeatSong]) -> (Vec<f32>, Vec<f32>) {
     (mean, std)
 }
 
-/// Writes hop-major input rows (`[hops][I]`), each input scaled by its gain and normalised,
-/// into `out` laid out input-major (`[I][out.len() / I]`, the layout burn's `Conv1d` reads);
-/// hops past the rows stay as they are (zero padding).
-fn normalise_channels_first(
-    rows: &[f32],
-    gains: &[f32],
-    mean: &[f32],
-    std: &[f32],
-    out: &mut [f32],
-) {
+/// Writes hop-major input rows (`[hops][I]`), normalised, into `out` laid out input-major
+/// (`[I][out.len() / I]`, the layout burn's `Conv1d` reads); hops past the rows stay as they
+/// are (zero padding).
+fn normalise_channels_first(rows: &[f32], mean: &[f32], std: &[f32], out: &mut [f32]) {
     let stride = out.len() / I;
     for (t, row) in rows.chunks_exact(I).enumerate() {
         for j in 0..I {
-            out[j * stride + t] = (gains[j] * row[j] - mean[j]) / std[j];
+            out[j * stride + t] = (row[j] - mean[j]) / std[j];
         }
     }
 }
 
+/// Draws a pool by share, then a song of it.
+fn draw_song<'a>(pools: &'a [SongPool], rng: &mut Rng) -> &'a BeatSong {
+    let total: f64 = pools.iter().map(|p| p.share).sum();
+    let mut pick = rng.uniform() * total;
+    let pool = pools
+        .iter()
+        .find(|p| {
+            pick -= p.share;
+            pick < 0.0
+        })
+        .unwrap_or(&pools[pools.len() - 1]);
+    &pool.songs[rng.below(pool.songs.len())]
+}
+
 /// Cuts a batch of normalised crops: inputs `[b, I, s]` and targets `[b, 1, s]`, flat.
 fn batch(
-    songs: &[BeatSong],
+    pools: &[SongPool],
     c: &BeatTrainConfig,
     mean: &[f32],
     std: &[f32],
@@ -216,14 +229,11 @@ fn batch(
     let mut x = vec![0.0f32; c.batch * I * s];
     let mut y = vec![0.0f32; c.batch * s];
     for b in 0..c.batch {
-        let song = &songs[rng.below(songs.len())];
+        let song = draw_song(pools, rng);
         let start = rng.below(song.frames().saturating_sub(s) + 1);
         let len = s.min(song.frames() - start);
-        let gains: Vec<f32> = (0..I)
-            .map(|_| (c.gain_jitter * rng.normal()).exp())
-            .collect();
         let rows = &song.inputs[start * I..(start + len) * I];
-        normalise_channels_first(rows, &gains, mean, std, &mut x[b * I * s..(b + 1) * I * s]);
+        normalise_channels_first(rows, mean, std, &mut x[b * I * s..(b + 1) * I * s]);
         y[b * s..b * s + len].copy_from_slice(&song.targets[start..start + len]);
     }
     (x, y)
@@ -235,10 +245,10 @@ fn bce(logits: Tensor<3>, targets: Tensor<3>) -> Tensor<1> {
     (softplus - targets * logits).mean()
 }
 
-/// Trains a network on `train`, scoring `valid` every `report_every` steps through `report`
+/// Trains a network on the pools' songs, scoring `valid` every `report_every` steps through `report`
 /// (step, training loss, validation loss); returns the weights in streaming form.
 pub fn train_beat_activation(
-    train: &[BeatSong],
+    train: &[SongPool],
     valid: &[BeatSong],
     c: &BeatTrainConfig,
     report_every: usize,
@@ -280,7 +290,7 @@ fn validation_loss(w: &BeatNetWeights, valid: &[BeatSong], c: &BeatTrainConfig) 
     for s in valid {
         let t = s.frames();
         let mut x = vec![0.0f32; I * t];
-        normalise_channels_first(&s.inputs, &[1.0; I], &w.input_mean, &w.input_std, &mut x);
+        normalise_channels_first(&s.inputs, &w.input_mean, &w.input_std, &mut x);
         let x = Tensor::from_data(TensorData::new(x, [1, I, t]), &device);
         let y = Tensor::from_data(TensorData::new(s.targets.clone(), [1, 1, t]), &device);
         let l = values(bce(net.forward(x), y))
@@ -400,7 +410,10 @@ mod tests {
                 inputs,
             }
         };
-        let train: Vec<BeatSong> = (0..6).map(|i| song(1000, i * 5)).collect();
+        let train = vec![SongPool {
+            songs: (0..6).map(|i| song(1000, i * 5)).collect(),
+            share: 1.0,
+        }];
         let valid = vec![song(800, 17)];
         let mut first = None;
         let mut last = None;

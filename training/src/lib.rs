@@ -6,6 +6,7 @@
 
 #![warn(missing_docs)]
 
+pub mod analysis_recipe;
 pub mod beat_training;
 pub mod body_shape;
 pub mod command;

@@ -1,69 +1,122 @@
-//! Finding songs with beat annotations in folders (as `../shared/tools/synth_beats.py` writes
-//! them: `NAME.flac|wav|mp3|ogg` beside `NAME.beats`), and the options every command that
-//! trains an ensemble on such songs shares.
+//! The songs a recipe of the analysis networks names: found in their folders (as
+//! `../shared/tools/synth_beats.py` writes them: `NAME.flac|wav|mp3|ogg` beside `NAME.beats`),
+//! split into training and validation, and analysed as they are and through drawn recording
+//! conditions.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use clap::Args;
+use model::neural::rng::Rng;
+use offline::analysis::{AnalyzeOptions, FileAnalysis, analyze_file, analyze_samples};
+use offline::recording_condition::RecordingCondition;
 
-/// How a song-trained ensemble is split, seeded and loaded.
-#[derive(Args, Debug, Clone)]
-pub struct EnsembleArgs {
-    /// Every this many songs, one is held out for validation.
-    #[arg(long, default_value_t = 10)]
-    pub valid_every: usize,
-    /// Seed of batches and initial weights (member i of the ensemble uses seed + i).
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Networks trained (one after the other, each with its own seed) and averaged.
-    #[arg(long, default_value_t = 3)]
-    pub ensemble: usize,
-    /// Songs analysed in parallel.
-    #[arg(long, default_value_t = 2)]
-    pub jobs: usize,
+use crate::analysis_recipe::{EnsembleSettings, SongFolder};
+
+/// One analysis to run: a song, heard as it is or through a recording condition.
+#[derive(Clone, Debug)]
+pub struct SongHearing {
+    /// The audio file (its `.beats` file lies beside it).
+    pub audio: PathBuf,
+    /// The condition it is heard through (`None`: as it is).
+    pub condition: Option<RecordingCondition>,
+    /// Index of the folder in the recipe.
+    pub folder: usize,
+    /// Whether it validates rather than trains.
+    pub validation: bool,
 }
 
-impl EnsembleArgs {
-    /// Whether song `i` (in the order found) is held out for validation.
-    pub fn held_out(&self, i: usize) -> bool {
-        self.valid_every > 1 && i % self.valid_every == self.valid_every - 1
-    }
-
-    /// The seed of ensemble member `member`.
-    pub fn member_seed(&self, member: usize) -> u64 {
-        self.seed + member as u64
-    }
-
-    /// Members to train (at least one).
-    pub fn members(&self) -> usize {
-        self.ensemble.max(1)
-    }
-}
-
-/// Every audio file with a `.beats` file beside it in `folders`, sorted within each folder.
-pub fn annotated_songs(folders: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut songs = Vec::new();
-    for folder in folders {
-        let dir = std::fs::read_dir(folder)
-            .with_context(|| format!("reading song folder {}", folder.display()))?;
-        let mut found = Vec::new();
-        for entry in dir {
-            let p = entry?.path();
-            if is_audio(&p) && p.with_extension("beats").exists() {
-                found.push(p);
+/// Every hearing of every song of `folders`: each training song as it is and through
+/// `copies` drawn conditions, each validation song as it is. Recordings of held-out sources
+/// are left out; `limit` keeps only that many songs per folder (for quick checks).
+pub fn hearings(
+    folders: &[SongFolder],
+    ensemble: &EnsembleSettings,
+    limit: Option<usize>,
+) -> Result<Vec<SongHearing>> {
+    let mut rng = Rng::new(ensemble.seed ^ 0x5eed_c0de);
+    let mut out = Vec::new();
+    for (f, folder) in folders.iter().enumerate() {
+        let mut songs = annotated_songs(&folder.folder)?;
+        if let Some(n) = limit {
+            songs.truncate(n);
+        }
+        for (i, audio) in songs.into_iter().enumerate() {
+            let every = ensemble.valid_every;
+            let validation = every > 1 && i % every == every - 1;
+            out.push(SongHearing {
+                audio: audio.clone(),
+                condition: None,
+                folder: f,
+                validation,
+            });
+            if validation {
+                continue;
+            }
+            for _ in 0..folder.copies {
+                out.push(SongHearing {
+                    audio: audio.clone(),
+                    condition: Some(RecordingCondition::draw(&mut rng)),
+                    folder: f,
+                    validation,
+                });
             }
         }
-        found.sort();
-        songs.extend(found);
     }
-    if songs.len() < 2 {
-        bail!(
-            "need at least two songs with .beats files in the song folders, found {}",
-            songs.len()
-        );
+    if out.iter().filter(|h| !h.validation).count() < 1 {
+        bail!("no training songs in the recipe's folders");
     }
-    Ok(songs)
+    Ok(out)
+}
+
+/// Every audio file with a `.beats` file beside it in `folder`, sorted, held-out sources left
+/// out.
+pub fn annotated_songs(folder: &Path) -> Result<Vec<PathBuf>> {
+    let dir = std::fs::read_dir(folder).with_context(|| {
+        format!(
+            "reading song folder {} (see the recipe's comments for how to make it)",
+            folder.display()
+        )
+    })?;
+    let mut found = Vec::new();
+    for entry in dir {
+        let p = entry?.path();
+        if is_audio(&p) && p.with_extension("beats").exists() && !offline::real_music::is_held_out(&p)
+        {
+            found.push(p);
+        }
+    }
+    found.sort();
+    if found.is_empty() {
+        bail!("no songs with .beats files in {}", folder.display());
+    }
+    Ok(found)
+}
+
+/// Analyses a hearing with the analysis that runs live.
+pub fn analyse(hearing: &SongHearing, options: AnalyzeOptions) -> Result<FileAnalysis> {
+    let audio = &hearing.audio;
+    let analysis = match &hearing.condition {
+        None => analyze_file(audio, options, &mut |_, _| {}),
+        Some(condition) => {
+            let decoded = offline::decode::decode_file(audio)
+                .with_context(|| format!("decoding {}", audio.display()))?;
+            let channels = usize::from(decoded.channels.max(1));
+            let mut mono: Vec<f32> = decoded
+                .samples
+                .chunks_exact(channels)
+                .map(|f| f.iter().sum::<f32>() / channels as f32)
+                .collect();
+            condition.apply(&mut mono, decoded.sample_rate);
+            analyze_samples(
+                &audio.display().to_string(),
+                &mono,
+                decoded.sample_rate,
+                1,
+                options,
+            )
+        }
+    };
+    analysis.with_context(|| format!("analysing {}", audio.display()))
 }
 
 fn is_audio(p: &Path) -> bool {

@@ -164,3 +164,63 @@ fn a_recipe_with_an_unknown_setting_is_refused_by_name() {
     assert!(!out.status.success());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn the_analysis_networks_train_by_a_recipe_and_the_analysis_reads_them() {
+    let Some(data) = shared_data("real-music") else {
+        return;
+    };
+    let dir = scratch("analysis");
+    // The shipped recipe's settings on folders every checkout of the shared data has: rendered
+    // songs and the real recordings (whose held-out sources must be skipped).
+    let shipped = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/analysis.recipe.toml"),
+    )
+    .unwrap();
+    let recipe = shipped
+        .replace("beat-data/synth-1000", &data.join("synth-beats").display().to_string())
+        .replace("beat-data/synth-5000", &data.join("synth-beats").display().to_string())
+        .replace("beat-data/real-extra", &data.join("real-music").display().to_string())
+        .replace("../shared/data/real-music", &data.join("real-music").display().to_string());
+    let recipe_file = dir.join("analysis.recipe.toml");
+    std::fs::write(&recipe_file, recipe).unwrap();
+    let beats = dir.join("beats.dnba");
+    let (_, stderr) = succeed(
+        danced_train()
+            .args(["beats", "--check", "3", "--recipe"])
+            .arg(&recipe_file)
+            .arg("--out")
+            .arg(&beats),
+    );
+    assert!(stderr.contains("analysed"), "{stderr}");
+    let ensemble = dsp::BeatNetEnsemble::from_bytes(&std::fs::read(&beats).unwrap()).unwrap();
+    assert_eq!(ensemble.nets.len(), 3);
+    let downbeats = dir.join("downbeats.dndb");
+    succeed(
+        danced_train()
+            .args(["downbeats", "--check", "3", "--recipe"])
+            .arg(&recipe_file)
+            .arg("--out")
+            .arg(&downbeats),
+    );
+    let ensemble =
+        dsp::DownbeatNetEnsemble::from_bytes(&std::fs::read(&downbeats).unwrap()).unwrap();
+    assert_eq!(ensemble.nets.len(), 3);
+    // A folder that is missing is named, with where to look for how to make it.
+    let missing = std::fs::read_to_string(&recipe_file)
+        .unwrap()
+        .replacen(
+            &format!("folder = {:?}", data.join("synth-beats").display().to_string()),
+            "folder = \"no-such-folder\"",
+            1,
+        );
+    std::fs::write(&recipe_file, missing).unwrap();
+    let out = danced_train()
+        .args(["beats", "--check", "1", "--recipe"])
+        .arg(&recipe_file)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("no-such-folder") && stderr.contains("recipe"), "{stderr}");
+}

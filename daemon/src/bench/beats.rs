@@ -34,6 +34,11 @@ pub struct ItemScore {
     pub median_lag_s: f64,
     /// Median reported tempo, BPM.
     pub tempo_bpm: f64,
+    /// Metrical level of the beats against the reference's.
+    pub level: MetricalLevel,
+    /// Signed time of every timely beat within the tolerance of a reference beat, minus that
+    /// beat's time, seconds (negative: early).
+    pub offsets_s: Vec<f64>,
     /// Beats per bar most often reported over the scored span.
     pub meter: usize,
     /// Share of the timely beats after the first four annotated bars that report the
@@ -47,6 +52,74 @@ pub struct ItemScore {
     pub analysis_s: f64,
     /// Error text if the file failed.
     pub error: Option<String>,
+}
+
+/// How the tempo of the beats relates to the reference's.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MetricalLevel {
+    /// The same tempo (within 8 %).
+    #[default]
+    Same,
+    /// Half the reference's tempo.
+    Half,
+    /// Twice the reference's tempo.
+    Double,
+    /// Any other relation (a third, two thirds, no steady tempo).
+    Other,
+}
+
+impl MetricalLevel {
+    /// The level of beats at `tempo` against a reference at `reference` BPM.
+    pub fn of(tempo: f64, reference: f64) -> Self {
+        let r = tempo / reference;
+        let near = |x: f64| (r / x - 1.0).abs() < 0.08;
+        if !r.is_finite() {
+            Self::Other
+        } else if near(1.0) {
+            Self::Same
+        } else if near(0.5) {
+            Self::Half
+        } else if near(2.0) {
+            Self::Double
+        } else {
+            Self::Other
+        }
+    }
+}
+
+/// Median tempo of a beat sequence, BPM (0 for fewer than two beats).
+fn median_ibi_tempo(beats: &[f64]) -> f64 {
+    let mut ibi: Vec<f64> = beats.windows(2).map(|w| w[1] - w[0]).collect();
+    if ibi.is_empty() {
+        return 0.0;
+    }
+    ibi.sort_by(f64::total_cmp);
+    60.0 / ibi[ibi.len() / 2]
+}
+
+/// For each estimated beat within `tolerance` of a reference beat, its signed offset to the
+/// nearest one.
+fn offsets(reference: &[f64], estimated: &[f64], tolerance: f64) -> Vec<f64> {
+    estimated
+        .iter()
+        .filter_map(|e| {
+            let i = reference.partition_point(|r| r < e);
+            [i.checked_sub(1), Some(i)]
+                .into_iter()
+                .flatten()
+                .filter_map(|j| reference.get(j))
+                .map(|r| e - r)
+                .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+                .filter(|d| d.abs() <= tolerance)
+        })
+        .collect()
+}
+
+/// Median of `values` (0 for none).
+pub fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
 fn in_span(times: &[f64], span: Option<(f64, f64)>) -> Vec<f64> {
@@ -79,6 +152,8 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
     let reference = metrics::trim_beats(&reference, item.skip_s);
     let estimated = metrics::trim_beats(&estimated, item.skip_s);
     let f_measure = metrics::beat_f_measure(&reference, &estimated, BEAT_TOLERANCE_S);
+    let level = MetricalLevel::of(median_ibi_tempo(&estimated), median_ibi_tempo(&reference));
+    let offsets_s = offsets(&reference, &estimated, BEAT_TOLERANCE_S);
     let c = metrics::continuity(&reference, &estimated);
     let downbeat_f = item.downbeats.as_ref().map(|r| {
         let est: Vec<f64> = analysis
@@ -125,6 +200,8 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
         beats: analysis.beats.len(),
         median_lag_s: lags.get(lags.len() / 2).copied().unwrap_or(0.0),
         tempo_bpm: analysis.median_tempo(),
+        level,
+        offsets_s,
         meter: {
             let threes = analysis
                 .beats
@@ -178,6 +255,69 @@ pub fn mean(scores: &[ItemScore], f: impl Fn(&ItemScore) -> f64) -> f64 {
     }
 }
 
+/// The set's metrical-level errors, timing bias and late beats, as a table cell's tail.
+pub fn level_and_timing(scores: &[ItemScore]) -> String {
+    let ok: Vec<&ItemScore> = scores.iter().filter(|s| s.error.is_none()).collect();
+    let count = |l| ok.iter().filter(|s| s.level == l).count();
+    let offsets: Vec<f64> = ok.iter().flat_map(|s| s.offsets_s.iter().copied()).collect();
+    let late: usize = ok.iter().map(|s| s.late_beats).sum();
+    let all: usize = ok.iter().map(|s| s.beats).sum();
+    format!(
+        "; half / double / other tempo on {} / {} / {} of {}, beats {:+.0} ms from the reference (median), {:.1} % decided late",
+        count(MetricalLevel::Half),
+        count(MetricalLevel::Double),
+        count(MetricalLevel::Other),
+        ok.len(),
+        1000.0 * median(&offsets),
+        100.0 * late as f64 / all.max(1) as f64
+    )
+}
+
+/// Mean beat F / CMLt / AMLt and downbeat F per genre, where the set names genres (the first
+/// word of each, e.g. `electronic` of `electronic: techno`).
+pub fn genre_table(set: &BenchSet, scores: &[ItemScore]) -> String {
+    let family = |g: &str| {
+        g.split([':', '/', ' '])
+            .next()
+            .unwrap_or(g)
+            .trim()
+            .to_string()
+    };
+    let mut families: Vec<String> = set
+        .items
+        .iter()
+        .filter_map(|i| i.genre.as_deref().map(family))
+        .collect();
+    families.sort();
+    families.dedup();
+    let mut out = String::new();
+    if families.is_empty() {
+        return out;
+    }
+    let _ = writeln!(out, "\n{} by genre", set.name);
+    let _ = writeln!(out, "| genre | files | F | CMLt | AMLt | downbeat F |");
+    let _ = writeln!(out, "| --- | --- | --- | --- | --- | --- |");
+    for fam in families {
+        let picked: Vec<ItemScore> = set
+            .items
+            .iter()
+            .zip(scores)
+            .filter(|(i, _)| i.genre.as_deref().map(family).as_deref() == Some(fam.as_str()))
+            .map(|(_, s)| s.clone())
+            .collect();
+        let _ = writeln!(
+            out,
+            "| {fam} | {} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            picked.len(),
+            mean(&picked, |s| s.f_measure),
+            mean(&picked, |s| s.cmlt),
+            mean(&picked, |s| s.amlt),
+            mean(&picked, |s| s.downbeat_f.unwrap_or(0.0))
+        );
+    }
+    out
+}
+
 /// Audio seconds per analyzer second over the scores.
 pub fn speed(scores: &[ItemScore]) -> f64 {
     let a: f64 = scores.iter().map(|s| s.analysis_s).sum();
@@ -191,11 +331,11 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
     let _ = writeln!(out, "\n{} — {}", set.name, tracker.name());
     let _ = writeln!(
         out,
-        "| file | F | CMLt | AMLt | downbeat F | meter | meter right | bar confidence | tempo | beats | late | lag p50 ms |"
+        "| file | F | CMLt | AMLt | downbeat F | meter | meter right | bar confidence | tempo | level | offset p50 ms | beats | late | lag p50 ms |"
     );
     let _ = writeln!(
         out,
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     for s in scores {
         if let Some(e) = &s.error {
@@ -204,7 +344,7 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
         }
         let _ = writeln!(
             out,
-            "| {} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.2} | {:.1} | {} | {} | {:.0} |",
+            "| {} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.2} | {:.1} | {:?} | {:+.0} | {} | {} | {:.0} |",
             s.name,
             s.f_measure,
             s.cmlt,
@@ -215,6 +355,8 @@ pub fn detail_table(set: &BenchSet, tracker: BeatTrackerKind, scores: &[ItemScor
                 .map_or("–".to_string(), |f| format!("{:.0} %", 100.0 * f)),
             s.bar_confidence,
             s.tempo_bpm,
+            s.level,
+            1000.0 * median(&s.offsets_s),
             s.beats,
             s.late_beats,
             s.median_lag_s * 1000.0

@@ -30,6 +30,8 @@ pub struct BenchItem {
     pub skip_s: f64,
     /// Beats per bar, where the annotation gives positions in the bar (the largest position).
     pub meter: Option<usize>,
+    /// Genre, where the set names one.
+    pub genre: Option<String>,
 }
 
 /// A named list of recordings.
@@ -107,42 +109,91 @@ pub fn synth_set(data: &Path) -> BenchSet {
 /// Songs rendered by `synth_beats.py` (exact beats and bar positions) in `dir`, as a set named
 /// `name`.
 pub fn rendered_set(name: &str, dir: &Path) -> BenchSet {
-    let mut items = Vec::new();
-    for p in sorted_dir(dir) {
-        if p.extension().is_some_and(|e| e == "flac")
-            && let Ok(beats) = read_times(&p.with_extension("beats"))
-        {
-            let stem = p
-                .file_stem()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned();
-            let positions = read_beat_positions(&p.with_extension("beats"));
-            let meter = positions
-                .as_ref()
-                .and_then(|v| v.iter().map(|&(_, p)| p).max());
-            let downbeats = positions.map(|v| {
-                v.into_iter()
-                    .filter(|&(_, p)| p == 1)
-                    .map(|(t, _)| t)
-                    .collect()
-            });
-            items.push(BenchItem {
-                name: stem,
-                audio: p,
-                beats,
-                span: None,
-                onsets: None,
-                downbeats,
-                skip_s: metrics::MIN_BEAT_TIME_S,
-                meter,
-            });
-        }
-    }
+    let items = sorted_dir(dir)
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "flac"))
+        .filter_map(|p| counted_item(&p))
+        .collect();
     BenchSet {
         name: name.to_string(),
         items,
     }
+}
+
+/// A recording whose `.beats` file gives `time  position-in-bar` per line (or times alone).
+fn counted_item(audio: &Path) -> Option<BenchItem> {
+    let beats_file = audio.with_extension("beats");
+    let beats = read_times(&beats_file).ok()?;
+    let stem = audio
+        .file_stem()
+        .unwrap_or_default()
+        .to_string_lossy()
+        .into_owned();
+    let positions = read_beat_positions(&beats_file);
+    let meter = positions
+        .as_ref()
+        .and_then(|v| v.iter().map(|&(_, p)| p).max());
+    let downbeats = positions.map(|v| {
+        v.into_iter()
+            .filter(|&(_, p)| p == 1)
+            .map(|(t, _)| t)
+            .collect()
+    });
+    Some(BenchItem {
+        name: stem,
+        audio: audio.to_path_buf(),
+        beats,
+        span: None,
+        onsets: None,
+        downbeats,
+        skip_s: metrics::MIN_BEAT_TIME_S,
+        meter,
+        genre: None,
+    })
+}
+
+/// The real recordings of `data/real-music` against their offline-tracker references, in two
+/// sets: `real-music`, the sources no network trains on ([`offline::real_music`]), and
+/// `real-music-train`, the rest.
+pub fn real_music_sets(data: &Path) -> [BenchSet; 2] {
+    let dir = data.join("real-music");
+    let genres: Vec<(String, String)> = fs::read_to_string(dir.join("tracks.tsv"))
+        .unwrap_or_default()
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let cols: Vec<&str> = l.split('\t').collect();
+            Some((cols.first()?.to_string(), cols.get(3)?.to_string()))
+        })
+        .collect();
+    let (mut held_out, mut train) = (Vec::new(), Vec::new());
+    for p in sorted_dir(&dir) {
+        if !p.extension().is_some_and(|e| e == "flac") {
+            continue;
+        }
+        let Some(mut item) = counted_item(&p) else {
+            continue;
+        };
+        item.genre = genres
+            .iter()
+            .find(|(n, _)| *n == item.name)
+            .map(|(_, g)| g.clone());
+        if offline::real_music::is_held_out(&p) {
+            held_out.push(item);
+        } else {
+            train.push(item);
+        }
+    }
+    [
+        BenchSet {
+            name: "real-music".into(),
+            items: held_out,
+        },
+        BenchSet {
+            name: "real-music-train".into(),
+            items: train,
+        },
+    ]
 }
 
 fn json_number(text: &str, key: &str) -> Option<f64> {
@@ -188,6 +239,7 @@ pub fn tang_set(data: &Path) -> BenchSet {
             downbeats: None,
             skip_s: metrics::MIN_BEAT_TIME_S,
             meter: None,
+            genre: None,
         });
     }
     BenchSet {
@@ -210,6 +262,7 @@ pub fn madmom_set(data: &Path) -> BenchSet {
             downbeats: read_downbeats(&dir.join("sample.beats")),
             skip_s: 0.0,
             meter: None,
+            genre: None,
         });
     }
     BenchSet {

@@ -18,7 +18,7 @@ pub struct BenchBeatsArgs {
     /// Trackers to compare (default: native, plus aubio when built in).
     #[arg(long, value_enum)]
     pub tracker: Vec<TrackerArg>,
-    /// Only these sets (synth-beats, tang2018, madmom-tests).
+    /// Only these sets (synth-beats, tang2018, real-music, real-music-train, madmom-tests).
     #[arg(long)]
     pub set: Vec<String>,
     /// Worker threads (each file is analysed on one thread).
@@ -67,9 +67,12 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
         );
         sets::rendered_set(&name, dir)
     });
+    let [real, real_train] = sets::real_music_sets(&args.data);
     let sets: Vec<sets::BenchSet> = [
         sets::synth_set(&args.data),
         sets::tang_set(&args.data),
+        real,
+        real_train,
         sets::madmom_set(&args.data),
     ]
     .into_iter()
@@ -137,6 +140,7 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
                     beats::mean(&scores, |s| s.onset_f.unwrap_or(0.0))
                 );
             }
+            extra += &beats::level_and_timing(&scores);
             row.push(format!(
                 "{:.3} / {:.3} / {:.3}{extra}",
                 beats::mean(&scores, |s| s.f_measure),
@@ -146,6 +150,7 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
             if args.verbose {
                 details.push_str(&beats::detail_table(set, tracker, &scores));
             }
+            details.push_str(&beats::genre_table(set, &scores));
             all.extend(scores);
         }
         row.push(format!("{:.0}", beats::speed(&all)));

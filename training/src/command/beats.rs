@@ -1,64 +1,51 @@
-//! `danced-train beats`: trains the learned beat activation on songs with exact beats.
+//! `danced-train beats`: trains the learned beat activation by the analysis recipe.
 //!
 //! Every song is streamed through the same analysis that runs live (so the network learns from
-//! exactly the inputs it will see on stage); the networks of the ensemble are written atomically
-//! in the format `dsp::BeatNetEnsemble` reads.
+//! exactly the inputs it will see on stage), as it is and through drawn recording conditions;
+//! the networks of the ensemble are written atomically in the format `dsp::BeatNetEnsemble`
+//! reads.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
 use dsp::BEAT_INPUT_DIM;
 use dsp::BeatNetEnsemble;
-use offline::analysis::{AnalyzeOptions, analyze_file};
+use offline::analysis::AnalyzeOptions;
 use offline::files::{read_times, write_atomic};
 
-use crate::beat_training::{BeatSong, BeatTrainConfig, train_beat_activation};
-use crate::song_files::{EnsembleArgs, annotated_songs};
+use crate::analysis_recipe::AnalysisRecipe;
+use crate::beat_training::{BeatSong, BeatTrainConfig, SongPool, train_beat_activation};
+use crate::song_files::{SongHearing, analyse, hearings};
 
 /// Options of `danced-train beats`.
 #[derive(Args, Debug, Clone)]
 pub struct TrainBeatsArgs {
-    /// Folder of songs with beats: `NAME.flac|wav|mp3|ogg` beside `NAME.beats` (time in seconds
-    /// first on each line), e.g. rendered by `../shared/tools/synth_beats.py --seed 1000`.
-    #[arg(long, required = true, num_args = 1..)]
-    pub songs: Vec<PathBuf>,
+    /// The recipe (default: the shipped networks', `configs/analysis.recipe.toml`, built in).
+    #[arg(long)]
+    pub recipe: Option<PathBuf>,
     /// Where to write the weights.
     #[arg(long, default_value = "beat_activation.dnba")]
     pub out: PathBuf,
-    /// Optimiser steps.
-    #[arg(long, default_value_t = BeatTrainConfig::default().steps)]
-    pub steps: usize,
-    /// Hidden channels.
-    #[arg(long, default_value_t = BeatTrainConfig::default().channels)]
-    pub channels: usize,
-    /// Dilation of each causal convolution layer (the receptive field is 1 + 2·their sum hops).
-    #[arg(long, value_delimiter = ',', default_values_t = BeatTrainConfig::default().dilations)]
-    pub dilations: Vec<usize>,
-    /// Hops per training sequence.
-    #[arg(long, default_value_t = BeatTrainConfig::default().sequence)]
-    pub sequence: usize,
-    /// Sequences per batch.
-    #[arg(long, default_value_t = BeatTrainConfig::default().batch)]
-    pub batch: usize,
-    /// Augmentation: standard deviation of a random log gain per sequence and band group.
-    #[arg(long, default_value_t = BeatTrainConfig::default().gain_jitter)]
-    pub gain_jitter: f32,
-    /// How many networks are trained, and how.
-    #[command(flatten)]
-    pub ensemble: EnsembleArgs,
+    /// Songs analysed in parallel.
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+    /// A quick check of the recipe: N steps per network on 3 songs per folder.
+    #[arg(long, hide = true)]
+    pub check: Option<usize>,
 }
 
-/// Streams one song through the analysis and pairs its hops with beat targets.
-fn load_song(audio: &Path, beats: &Path) -> Result<BeatSong> {
-    let beats = read_times(beats).with_context(|| format!("reading beats {}", beats.display()))?;
+/// Streams one hearing through the analysis and pairs its hops with beat targets.
+fn load_song(hearing: &SongHearing) -> Result<BeatSong> {
+    let beats_file = hearing.audio.with_extension("beats");
+    let beats = read_times(&beats_file)
+        .with_context(|| format!("reading beats {}", beats_file.display()))?;
     let options = AnalyzeOptions {
         keep_beat_inputs: true,
         ..AnalyzeOptions::default()
     };
-    let a = analyze_file(audio, options, &mut |_, _| {})
-        .with_context(|| format!("analysing {}", audio.display()))?;
+    let a = analyse(hearing, options)?;
     let frames = a.beat_inputs.len() / BEAT_INPUT_DIM;
     let first = a.first_hop_s.unwrap_or(0.0) + dsp::tracker::EVENT_TIME_OFFSET_S;
     let shifted: Vec<f64> = beats.iter().map(|b| b - first).collect();
@@ -70,48 +57,59 @@ fn load_song(audio: &Path, beats: &Path) -> Result<BeatSong> {
 
 /// Runs `danced-train beats`.
 pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
-    let pairs = annotated_songs(&args.songs)?;
+    let (recipe, _) = AnalysisRecipe::read_or_shipped(args.recipe.as_deref())?;
+    let r = &recipe.beats;
+    let check_songs = args.check.map(|_| 3);
+    let hearings = hearings(&r.songs, &r.ensemble, check_songs)?;
     let t = Instant::now();
-    let loaded = offline::pool::parallel_map(&pairs, args.ensemble.jobs.max(1), |p| {
-        load_song(p, &p.with_extension("beats"))
-    });
-    let (mut train, mut valid) = (Vec::new(), Vec::new());
-    for (i, song) in loaded.into_iter().enumerate() {
+    let loaded = offline::pool::parallel_map(&hearings, args.jobs.max(1), load_song);
+    let mut pools: Vec<SongPool> = r
+        .songs
+        .iter()
+        .map(|f| SongPool {
+            songs: Vec::new(),
+            share: f.share,
+        })
+        .collect();
+    let mut valid = Vec::new();
+    for (hearing, song) in hearings.iter().zip(loaded) {
         let song = song?;
-        if args.ensemble.held_out(i) {
+        if hearing.validation {
             valid.push(song);
         } else {
-            train.push(song);
+            pools[hearing.folder].songs.push(song);
         }
     }
-    let hours: f64 =
-        train.iter().map(|s| s.frames() as f64).sum::<f64>() / dsp::hop_rate() / 3600.0;
+    pools.retain(|p| !p.songs.is_empty());
+    let hours = |songs: &mut dyn Iterator<Item = &BeatSong>| {
+        songs.map(|s| s.frames() as f64).sum::<f64>() / dsp::hop_rate() / 3600.0
+    };
     eprintln!(
-        "analysed {} songs in {:.0} s: {} for training ({hours:.2} h), {} for validation",
-        pairs.len(),
+        "analysed {} hearings of the songs in {:.0} s: {:.2} h for training, {:.2} h for validation",
+        hearings.len(),
         t.elapsed().as_secs_f64(),
-        train.len(),
-        valid.len()
+        hours(&mut pools.iter().flat_map(|p| &p.songs)),
+        hours(&mut valid.iter())
     );
     let config = BeatTrainConfig {
-        steps: args.steps,
-        channels: args.channels,
-        dilations: args.dilations.clone(),
-        sequence: args.sequence,
-        batch: args.batch,
-        gain_jitter: args.gain_jitter,
-        seed: args.ensemble.seed,
-        ..BeatTrainConfig::default()
+        channels: r.channels,
+        kernel: r.kernel,
+        dilations: r.dilations.clone(),
+        batch: r.batch,
+        sequence: r.sequence,
+        steps: args.check.unwrap_or(r.steps),
+        learning_rate: r.learning_rate,
+        seed: r.ensemble.seed,
     };
     let t = Instant::now();
     let mut nets = Vec::new();
-    for member in 0..args.ensemble.members() {
+    for member in 0..r.ensemble.members {
         let config = BeatTrainConfig {
-            seed: args.ensemble.member_seed(member),
+            seed: r.ensemble.seed + member as u64,
             ..config.clone()
         };
         nets.push(train_beat_activation(
-            &train,
+            &pools,
             &valid,
             &config,
             500,

@@ -6,49 +6,36 @@
 //! (with their jitter and their mistakes); the ensemble is written atomically in the format
 //! `dsp::DownbeatNetEnsemble` reads.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
 use dsp::{BarFeatures, DownbeatNetEnsemble};
-use offline::analysis::{AnalyzeOptions, analyze_file};
+use offline::analysis::AnalyzeOptions;
 use offline::files::{read_beat_positions, write_atomic};
 
+use crate::analysis_recipe::AnalysisRecipe;
 use crate::downbeat_training::{
     DownbeatExamples, DownbeatTrainConfig, accuracy, train_downbeat_net,
 };
-use crate::song_files::{EnsembleArgs, annotated_songs};
+use crate::song_files::{SongHearing, analyse, hearings};
 
 /// Options of `danced-train downbeats`.
 #[derive(Args, Debug, Clone)]
 pub struct TrainDownbeatsArgs {
-    /// Folders of songs with beats and their positions in the bar: `NAME.flac|wav|mp3|ogg`
-    /// beside `NAME.beats` (`time_s<TAB>beat_in_bar` per line), e.g. rendered by
-    /// `../shared/tools/synth_beats.py --seed 1000`.
-    #[arg(long, required = true, num_args = 1..)]
-    pub songs: Vec<PathBuf>,
+    /// The recipe (default: the shipped networks', `configs/analysis.recipe.toml`, built in).
+    #[arg(long)]
+    pub recipe: Option<PathBuf>,
     /// Where to write the weights.
     #[arg(long, default_value = "downbeat.dndb")]
     pub out: PathBuf,
-    /// Optimiser steps per network.
-    #[arg(long, default_value_t = DownbeatTrainConfig::default().steps)]
-    pub steps: usize,
-    /// Width of each hidden layer.
-    #[arg(long, value_delimiter = ',', default_values_t = DownbeatTrainConfig::default().hidden)]
-    pub hidden: Vec<usize>,
-    /// Rows per batch.
-    #[arg(long, default_value_t = DownbeatTrainConfig::default().batch)]
-    pub batch: usize,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = DownbeatTrainConfig::default().learning_rate)]
-    pub learning_rate: f64,
-    /// Standard deviation of the noise added to the inputs.
-    #[arg(long, default_value_t = DownbeatTrainConfig::default().input_noise)]
-    pub input_noise: f32,
-    /// How many networks are trained, and how.
-    #[command(flatten)]
-    pub ensemble: EnsembleArgs,
+    /// Songs analysed in parallel.
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+    /// A quick check of the recipe: N steps per network on 3 songs per folder.
+    #[arg(long, hide = true)]
+    pub check: Option<usize>,
 }
 
 /// One analysed song: its tracked beats' bar features and its annotation.
@@ -58,8 +45,8 @@ struct LabelledSong {
     meter: usize,
 }
 
-fn load_song(audio: &Path) -> Result<LabelledSong> {
-    let beats = audio.with_extension("beats");
+fn load_song(hearing: &SongHearing) -> Result<LabelledSong> {
+    let beats = hearing.audio.with_extension("beats");
     let reference = read_beat_positions(&beats).with_context(|| {
         format!(
             "{}: no positions in the bar (second column)",
@@ -71,8 +58,7 @@ fn load_song(audio: &Path) -> Result<LabelledSong> {
         keep_bar_features: true,
         ..AnalyzeOptions::default()
     };
-    let a = analyze_file(audio, options, &mut |_, _| {})
-        .with_context(|| format!("analysing {}", audio.display()))?;
+    let a = analyse(hearing, options)?;
     Ok(LabelledSong {
         features: a.bar_features,
         reference,
@@ -82,37 +68,42 @@ fn load_song(audio: &Path) -> Result<LabelledSong> {
 
 /// Runs `danced-train downbeats`.
 pub fn train_downbeats(args: &TrainDownbeatsArgs) -> Result<()> {
-    let songs = annotated_songs(&args.songs)?;
+    let (recipe, _) = AnalysisRecipe::read_or_shipped(args.recipe.as_deref())?;
+    let r = &recipe.downbeats;
+    let hearings = hearings(&r.songs, &r.ensemble, args.check.map(|_| 3))?;
     let t = Instant::now();
-    let loaded = offline::pool::parallel_map(&songs, args.ensemble.jobs.max(1), |p| load_song(p));
+    let loaded = offline::pool::parallel_map(&hearings, args.jobs.max(1), load_song);
     let (mut train, mut valid) = (DownbeatExamples::default(), DownbeatExamples::default());
-    for (i, song) in loaded.into_iter().enumerate() {
+    for (hearing, song) in hearings.iter().zip(loaded) {
         let s = song?;
-        let held_out = args.ensemble.held_out(i);
-        let into = if held_out { &mut valid } else { &mut train };
+        let into = if hearing.validation {
+            &mut valid
+        } else {
+            &mut train
+        };
         into.add_song(&s.features, &s.reference, s.meter);
     }
     eprintln!(
-        "analysed {} songs in {:.0} s: {} labelled beats for training, {} for validation",
-        songs.len(),
+        "analysed {} hearings of the songs in {:.0} s: {} labelled beats for training, {} for validation",
+        hearings.len(),
         t.elapsed().as_secs_f64(),
         train.len(),
         valid.len()
     );
     let config = DownbeatTrainConfig {
-        hidden: args.hidden.clone(),
-        batch: args.batch,
-        steps: args.steps,
-        learning_rate: args.learning_rate,
-        input_noise: args.input_noise,
-        seed: args.ensemble.seed,
+        hidden: r.hidden.clone(),
+        batch: r.batch,
+        steps: args.check.unwrap_or(r.steps),
+        learning_rate: r.learning_rate,
+        input_noise: r.input_noise,
+        seed: r.ensemble.seed,
     };
     let class_prior = train.class_frequencies();
     let t = Instant::now();
     let mut nets = Vec::new();
-    for member in 0..args.ensemble.members() {
+    for member in 0..r.ensemble.members {
         let config = DownbeatTrainConfig {
-            seed: args.ensemble.member_seed(member),
+            seed: r.ensemble.seed + member as u64,
             ..config.clone()
         };
         nets.push(train_downbeat_net(&train, &config, 500, |step, loss, w| {
