@@ -51,6 +51,18 @@ pub struct AnalyzerConfig {
     pub beat_params: BeatTrackerParams,
     /// Tuning of the bar pointer.
     pub bar_params: BarPointerParams,
+    /// The learned networks (default: the shipped ones).
+    pub networks: AnalysisNetworks,
+}
+
+/// The learned networks the analysis runs: the shipped ones, unless weights trained by
+/// `danced-train` replace them (to measure them before they ship).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct AnalysisNetworks {
+    /// Beat activation weights (`None`: the shipped ones).
+    pub beat: Option<&'static BeatNetEnsemble>,
+    /// Downbeat network weights (`None`: the shipped ones).
+    pub downbeat: Option<&'static crate::DownbeatNetEnsemble>,
 }
 
 /// An onset, reported by the causal peak picker.
@@ -167,7 +179,13 @@ impl Analyzer {
             BeatTrackerKind::Native => Tracker::Native(Box::new(NativeTracker {
                 picker: OnsetPeakPicker::new(fps),
                 input: BeatInput::new(fps),
-                activation: BeatActivation::new(BeatNetEnsemble::builtin()),
+                activation: BeatActivation::new(
+                    config
+                        .networks
+                        .beat
+                        .cloned()
+                        .unwrap_or_else(BeatNetEnsemble::builtin),
+                ),
                 beats: BeatTracker::with_params(fps, config.beat_params),
             })),
             #[cfg(feature = "aubio")]
@@ -196,7 +214,15 @@ impl Analyzer {
             beat_input: [0.0; BEAT_INPUT_DIM],
             beat_activation: 0.0,
             tracker,
-            meter: MeterTracker::new(fps, bar_params(config)),
+            meter: MeterTracker::with_network(
+                fps,
+                bar_params(config),
+                config
+                    .networks
+                    .downbeat
+                    .cloned()
+                    .unwrap_or_else(crate::DownbeatNetEnsemble::builtin),
+            ),
             counter: BeatCounter::default(),
             framer: config.model_rate.map(FeatureFramer::new),
             short,

@@ -432,6 +432,7 @@ mod tests {
                 tracker: BeatTrackerKind::Aubio,
                 beat_params: Default::default(),
                 bar_params: Default::default(),
+                networks: Default::default(),
             })
             .unwrap();
             let mut beats = Beats(Vec::new());

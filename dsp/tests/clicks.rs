@@ -47,6 +47,7 @@ fn analyse(rate: u32, x: &[f32]) -> Events {
         tracker: BeatTrackerKind::Native,
         beat_params: Default::default(),
         bar_params: Default::default(),
+        networks: Default::default(),
     })
     .unwrap();
     let mut ev = Events::default();

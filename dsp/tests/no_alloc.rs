@@ -49,6 +49,7 @@ fn count_allocations(
         tracker,
         beat_params: Default::default(),
         bar_params: Default::default(),
+        networks: Default::default(),
     })
     .unwrap();
     // A drum-like signal so every event path (onsets, beats, bars, frames) is exercised.

@@ -61,6 +61,7 @@ fn run(rate: u32, channels: u16, seconds: f64, mut sample: impl FnMut(usize) -> 
         tracker: BeatTrackerKind::Native,
         beat_params: Default::default(),
         bar_params: Default::default(),
+        networks: Default::default(),
     })
     .unwrap();
     let frames = (rate as f64 * seconds) as usize;

@@ -109,6 +109,8 @@ pub struct AnalyzeOptions {
     /// Song time the analysis starts at, seconds: earlier audio is decoded and skipped, as if
     /// the stream had begun there (all times are then counted from it).
     pub start_s: f64,
+    /// The learned networks (default: the shipped ones).
+    pub networks: dsp::AnalysisNetworks,
 }
 
 impl AnalyzeOptions {
@@ -280,6 +282,7 @@ fn stream(
         tracker: options.tracker,
         beat_params: options.beat_params,
         bar_params: options.bar_params,
+        networks: options.networks,
     })
     .map_err(|source| OfflineError::Analysis { path: name, source })?;
     let mut result = FileAnalysis {
@@ -334,4 +337,33 @@ fn stream(
     result.analysis_time = analysis_time;
     progress(result.duration_s, total_s);
     Ok(result)
+}
+
+/// The analysis networks with weights read from these files in place of the shipped ones
+/// (`None`: shipped). They live as long as the process: an analysis is configured by value.
+pub fn networks_from_files(
+    beat: Option<&Path>,
+    downbeat: Option<&Path>,
+) -> Result<dsp::AnalysisNetworks, OfflineError> {
+    let read = |path: &Path| {
+        std::fs::read(path).map_err(|error| OfflineError::Io {
+            path: path.to_path_buf(),
+            error,
+        })
+    };
+    let refused = |path: &Path, source| OfflineError::Analysis {
+        path: path.display().to_string(),
+        source,
+    };
+    let mut networks = dsp::AnalysisNetworks::default();
+    if let Some(p) = beat {
+        let ensemble = dsp::BeatNetEnsemble::from_bytes(&read(p)?).map_err(|e| refused(p, e))?;
+        networks.beat = Some(Box::leak(Box::new(ensemble)));
+    }
+    if let Some(p) = downbeat {
+        let ensemble =
+            dsp::DownbeatNetEnsemble::from_bytes(&read(p)?).map_err(|e| refused(p, e))?;
+        networks.downbeat = Some(Box::leak(Box::new(ensemble)));
+    }
+    Ok(networks)
 }

@@ -33,6 +33,13 @@ pub struct BenchBeatsArgs {
     /// Override bar pointer tuning, e.g. `jump=0.05,switch_ratio=3` (for tuning).
     #[arg(long, default_value = "")]
     pub bar_params: String,
+    /// Beat activation weights to measure in place of the shipped ones (`danced-train beats`).
+    #[arg(long)]
+    pub beat_net: Option<PathBuf>,
+    /// Downbeat network weights to measure in place of the shipped ones
+    /// (`danced-train downbeats`).
+    #[arg(long)]
+    pub downbeat_net: Option<PathBuf>,
     /// Further folders of songs rendered by `synth_beats.py`, each scored as a set named after
     /// the folder.
     #[arg(long, num_args = 1..)]
@@ -85,6 +92,10 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
     }
     let beat_params = dsp::beat::BeatTrackerParams::default().with_overrides(&args.beat_params)?;
     let bar_params = dsp::BarPointerParams::default().with_overrides(&args.bar_params)?;
+    let networks = offline::analysis::networks_from_files(
+        args.beat_net.as_deref(),
+        args.downbeat_net.as_deref(),
+    )?;
     let total: usize = sets.iter().map(|s| s.items.len()).sum::<usize>() * trackers.len();
     let pb = count_bar(total as u64);
     let mut rows = Vec::new();
@@ -97,6 +108,7 @@ pub fn bench_beats(args: BenchBeatsArgs) -> Result<()> {
                 tracker,
                 beat_params,
                 bar_params,
+                networks,
                 ..Default::default()
             };
             let scores = beats::run_set(set, options, args.jobs, &|name| {

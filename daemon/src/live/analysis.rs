@@ -250,6 +250,7 @@ fn live_config(rate: u32, channels: u16, model_rate: f64) -> AnalyzerConfig {
         tracker: dsp::BeatTrackerKind::Native,
         beat_params: Default::default(),
         bar_params: Default::default(),
+        networks: Default::default(),
     }
 }
 

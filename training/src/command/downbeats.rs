@@ -30,6 +30,10 @@ pub struct TrainDownbeatsArgs {
     /// Where to write the weights.
     #[arg(long, default_value = "downbeat.dndb")]
     pub out: PathBuf,
+    /// Beat activation weights the analysis runs while it collects the bar features (default:
+    /// the shipped ones; after `danced-train beats`, its output, as the shipped pair is made).
+    #[arg(long)]
+    pub beat_net: Option<PathBuf>,
     /// Songs analysed in parallel.
     #[arg(long, default_value_t = 2)]
     pub jobs: usize,
@@ -45,7 +49,7 @@ struct LabelledSong {
     meter: usize,
 }
 
-fn load_song(hearing: &SongHearing) -> Result<LabelledSong> {
+fn load_song(hearing: &SongHearing, networks: dsp::AnalysisNetworks) -> Result<LabelledSong> {
     let beats = hearing.audio.with_extension("beats");
     let reference = read_beat_positions(&beats).with_context(|| {
         format!(
@@ -56,6 +60,7 @@ fn load_song(hearing: &SongHearing) -> Result<LabelledSong> {
     let meter = reference.iter().map(|r| r.1).max().unwrap_or(4);
     let options = AnalyzeOptions {
         keep_bar_features: true,
+        networks,
         ..AnalyzeOptions::default()
     };
     let a = analyse(hearing, options)?;
@@ -72,7 +77,9 @@ pub fn train_downbeats(args: &TrainDownbeatsArgs) -> Result<()> {
     let r = &recipe.downbeats;
     let hearings = hearings(&r.songs, &r.ensemble, args.check.map(|_| 3))?;
     let t = Instant::now();
-    let loaded = offline::pool::parallel_map(&hearings, args.jobs.max(1), load_song);
+    let networks = offline::analysis::networks_from_files(args.beat_net.as_deref(), None)?;
+    let loaded =
+        offline::pool::parallel_map(&hearings, args.jobs.max(1), |h| load_song(h, networks));
     let (mut train, mut valid) = (DownbeatExamples::default(), DownbeatExamples::default());
     for (hearing, song) in hearings.iter().zip(loaded) {
         let s = song?;
