@@ -24,14 +24,15 @@ pub struct AnalysisRecipe {
     pub downbeats: DownbeatRecipe,
 }
 
-/// A folder of songs a network trains on, and how.
+/// Folders of songs a network trains on as one pool, and how.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SongFolder {
-    /// The folder: `NAME.flac|wav|mp3|ogg` beside `NAME.beats`; relative to where the command
-    /// runs. Recordings of the held-out sources (`offline::real_music`) in it are skipped.
-    pub folder: PathBuf,
-    /// Relative share of training batches drawn from this folder (shares are normalised).
+    /// The folders, their songs taken in this order: `NAME.flac|wav|mp3|ogg` beside
+    /// `NAME.beats`; relative to where the command runs. Recordings of the held-out sources
+    /// (`offline::real_music`) in them are skipped.
+    pub folders: Vec<PathBuf>,
+    /// Relative share of training batches drawn from this pool (shares are normalised).
     #[serde(default = "defaults::share")]
     pub share: f64,
     /// Copies of each song heard through a drawn recording condition (level, equalisation,
@@ -48,7 +49,7 @@ pub struct EnsembleSettings {
     pub members: usize,
     /// Seed of the first member's initial weights and batches, and of the recording conditions.
     pub seed: u64,
-    /// Every this many songs of a folder, one is kept for validation (0: none).
+    /// Every this many songs of a pool, one is kept for validation (0: none).
     pub valid_every: usize,
 }
 
@@ -177,19 +178,22 @@ impl AnalysisRecipe {
 
 fn check_songs(name: &str, songs: &[SongFolder]) -> Result<(), String> {
     if songs.is_empty() {
-        return Err(format!("{name}: a recipe needs at least one [[{name}.songs]] folder"));
+        return Err(format!("{name}: a recipe needs at least one [[{name}.songs]] pool"));
     }
     for s in songs {
+        if s.folders.is_empty() {
+            return Err(format!("{name}: every [[{name}.songs]] pool needs folders"));
+        }
         if !(s.share.is_finite() && s.share > 0.0) {
             return Err(format!(
                 "{name}: share of {} must be > 0",
-                s.folder.display()
+                s.folders[0].display()
             ));
         }
         if s.copies > 16 {
             return Err(format!(
                 "{name}: copies of {} must be at most 16",
-                s.folder.display()
+                s.folders[0].display()
             ));
         }
     }
@@ -211,7 +215,10 @@ mod tests {
         let bad = SHIPPED_ANALYSIS_RECIPE.replacen("[beats]", "[beats]\nmirror = true", 1);
         let e = AnalysisRecipe::parse(&bad, "x.toml").unwrap_err();
         assert!(e.message.contains("mirror"), "{}", e.message);
-        let bad = SHIPPED_ANALYSIS_RECIPE.replacen("share = ", "share = -", 1);
+        let bad = SHIPPED_ANALYSIS_RECIPE.replacen("copies = 3", "copies = 30", 1);
+        let e = AnalysisRecipe::parse(&bad, "x.toml").unwrap_err();
+        assert!(e.message.contains("copies"), "{}", e.message);
+        let bad = SHIPPED_ANALYSIS_RECIPE.replacen("copies = 3", "copies = 3\nshare = -1", 1);
         let e = AnalysisRecipe::parse(&bad, "x.toml").unwrap_err();
         assert!(e.message.contains("share"), "{}", e.message);
     }

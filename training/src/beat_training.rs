@@ -205,6 +205,9 @@ fn normalise_channels_first(rows: &[f32], mean: &[f32], std: &[f32], out: &mut [
 
 /// Draws a pool by share, then a song of it.
 fn draw_song<'a>(pools: &'a [SongPool], rng: &mut Rng) -> &'a BeatSong {
+    if let [pool] = pools {
+        return &pool.songs[rng.below(pool.songs.len())];
+    }
     let total: f64 = pools.iter().map(|p| p.share).sum();
     let mut pick = rng.uniform() * total;
     let pool = pools

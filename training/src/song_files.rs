@@ -19,8 +19,8 @@ pub struct SongHearing {
     pub audio: PathBuf,
     /// The condition it is heard through (`None`: as it is).
     pub condition: Option<RecordingCondition>,
-    /// Index of the folder in the recipe.
-    pub folder: usize,
+    /// Index of the song pool in the recipe.
+    pub pool: usize,
     /// Whether it validates rather than trains.
     pub validation: bool,
 }
@@ -28,6 +28,7 @@ pub struct SongHearing {
 /// Every hearing of every song of `folders`: each training song as it is and through
 /// `copies` drawn conditions, each validation song as it is. Recordings of held-out sources
 /// are left out; `limit` keeps only that many songs per folder (for quick checks).
+/// Validation songs are every `valid_every`-th of a pool, counting across its folders.
 pub fn hearings(
     folders: &[SongFolder],
     ensemble: &EnsembleSettings,
@@ -36,9 +37,13 @@ pub fn hearings(
     let mut rng = Rng::new(ensemble.seed ^ 0x5eed_c0de);
     let mut out = Vec::new();
     for (f, folder) in folders.iter().enumerate() {
-        let mut songs = annotated_songs(&folder.folder)?;
-        if let Some(n) = limit {
-            songs.truncate(n);
+        let mut songs = Vec::new();
+        for dir in &folder.folders {
+            let mut found = annotated_songs(dir)?;
+            if let Some(n) = limit {
+                found.truncate(n);
+            }
+            songs.extend(found);
         }
         for (i, audio) in songs.into_iter().enumerate() {
             let every = ensemble.valid_every;
@@ -46,7 +51,7 @@ pub fn hearings(
             out.push(SongHearing {
                 audio: audio.clone(),
                 condition: None,
-                folder: f,
+                pool: f,
                 validation,
             });
             if validation {
@@ -56,7 +61,7 @@ pub fn hearings(
                 out.push(SongHearing {
                     audio: audio.clone(),
                     condition: Some(RecordingCondition::draw(&mut rng)),
-                    folder: f,
+                    pool: f,
                     validation,
                 });
             }

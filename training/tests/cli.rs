@@ -177,11 +177,14 @@ fn the_analysis_networks_train_by_a_recipe_and_the_analysis_reads_them() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/analysis.recipe.toml"),
     )
     .unwrap();
+    let synth = data.join("synth-beats").display().to_string();
+    let real = data.join("real-music").display().to_string();
     let recipe = shipped
-        .replace("beat-data/synth-1000", &data.join("synth-beats").display().to_string())
-        .replace("beat-data/synth-5000", &data.join("synth-beats").display().to_string())
-        .replace("beat-data/real-extra", &data.join("real-music").display().to_string())
-        .replace("../shared/data/real-music", &data.join("real-music").display().to_string());
+        .replace("beat-data/synth-1000", &synth)
+        .replace("beat-data/synth-5000", &synth)
+        .replace("beat-data/synth-8000", &synth)
+        .replace("beat-data/real-extra", &real)
+        .replace("../shared/data/real-music", &real);
     let recipe_file = dir.join("analysis.recipe.toml");
     std::fs::write(&recipe_file, recipe).unwrap();
     let beats = dir.join("beats.dnba");
@@ -210,8 +213,8 @@ fn the_analysis_networks_train_by_a_recipe_and_the_analysis_reads_them() {
     let missing = std::fs::read_to_string(&recipe_file)
         .unwrap()
         .replacen(
-            &format!("folder = {:?}", data.join("synth-beats").display().to_string()),
-            "folder = \"no-such-folder\"",
+            &format!("folders = [{synth:?}"),
+            "folders = [\"no-such-folder\"",
             1,
         );
     std::fs::write(&recipe_file, missing).unwrap();

@@ -77,7 +77,7 @@ pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
         if hearing.validation {
             valid.push(song);
         } else {
-            pools[hearing.folder].songs.push(song);
+            pools[hearing.pool].songs.push(song);
         }
     }
     pools.retain(|p| !p.songs.is_empty());
