@@ -296,3 +296,20 @@ pub fn steady_songs(set: &BenchSet) -> Vec<(f64, &BenchItem)> {
     steady.sort_by(|a, b| a.0.total_cmp(&b.0));
     steady
 }
+
+/// The set's songs with annotated downbeats, with their reference tempo (from the median beat
+/// interval), slowest first.
+pub fn by_reference_tempo(set: &BenchSet) -> Vec<(f64, &BenchItem)> {
+    let mut songs: Vec<(f64, &BenchItem)> = set
+        .items
+        .iter()
+        .filter(|i| i.downbeats.is_some() && i.beats.len() > 2)
+        .map(|i| {
+            let mut ibi: Vec<f64> = i.beats.windows(2).map(|w| w[1] - w[0]).collect();
+            ibi.sort_by(f64::total_cmp);
+            (60.0 / ibi[ibi.len() / 2], i)
+        })
+        .collect();
+    songs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    songs
+}

@@ -1,5 +1,6 @@
 //! `danced bench cues`: key poses cued "on the next bar" during real-time replays of rendered
-//! songs, measured from outside (`crate::bench::cues`): where each lands against the true downbeats.
+//! songs or real recordings, measured from outside (`crate::bench::cues`): where each lands
+//! against the true (or reference) downbeats.
 
 use std::path::PathBuf;
 
@@ -18,6 +19,10 @@ pub struct BenchCuesArgs {
     /// A folder of songs rendered by `synth_beats.py` to use instead.
     #[arg(long)]
     pub songs: Option<PathBuf>,
+    /// Which songs: rendered ones (exact downbeats) or the held-out real recordings (against
+    /// their offline-tracker downbeats).
+    #[arg(long, value_enum, default_value_t = CueSet::Rendered)]
+    pub set: CueSet,
     /// Songs replayed (constant tempo, spread over the tempo range).
     #[arg(long, default_value_t = 5)]
     pub count: usize,
@@ -35,15 +40,31 @@ pub struct BenchCuesArgs {
     pub lead_ms: f64,
 }
 
+/// The songs `danced bench cues` replays.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CueSet {
+    /// Constant-tempo rendered songs (`synth-beats`, or `--songs`).
+    Rendered,
+    /// The real recordings no network trains on (`real-music`).
+    RealMusic,
+}
+
 /// Runs `danced bench cues`.
 pub fn bench_cues(args: BenchCuesArgs) -> Result<()> {
-    let set = match &args.songs {
-        Some(dir) => crate::bench::sets::rendered_set("songs", dir),
-        None => crate::bench::sets::synth_set(&args.data),
+    let set = match (&args.songs, args.set) {
+        (Some(dir), _) => crate::bench::sets::rendered_set("songs", dir),
+        (None, CueSet::Rendered) => crate::bench::sets::synth_set(&args.data),
+        (None, CueSet::RealMusic) => {
+            let [held_out, _] = crate::bench::sets::real_music_sets(&args.data);
+            held_out
+        }
     };
-    let steady = crate::bench::sets::steady_songs(&set);
+    let steady = match args.set {
+        CueSet::Rendered => crate::bench::sets::steady_songs(&set),
+        CueSet::RealMusic => crate::bench::sets::by_reference_tempo(&set),
+    };
     if steady.is_empty() {
-        bail!("no constant-tempo rendered songs found (pass --data or --songs)");
+        bail!("no constant-tempo annotated songs found (pass --data or --songs)");
     }
     let n = args.count.max(1).min(steady.len());
     let cue_times: Vec<f64> = (0..args.cues)
