@@ -38,7 +38,8 @@ pub mod tracker;
 pub mod tuning;
 
 pub use analyzer::{
-    AnalysisNetworks, AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind, OnsetEvent,
+    AnalysisNetworks, AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, BeatTrackerKind,
+    OnsetEvent,
 };
 pub use bar_class::{BarClass, Level};
 pub use bar_features::{BAR_FEATURE_DIM, BarFeatures};

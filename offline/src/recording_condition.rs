@@ -137,10 +137,13 @@ impl RecordingCondition {
     pub fn apply(&self, samples: &mut [f32], rate: u32) {
         let fs = (rate as f32).hz();
         let filters = [
-            self.low_shelf.map(|b| (Type::LowShelf(b.db), b.hz, Q_BUTTERWORTH_F32)),
-            self.high_shelf.map(|b| (Type::HighShelf(b.db), b.hz, Q_BUTTERWORTH_F32)),
+            self.low_shelf
+                .map(|b| (Type::LowShelf(b.db), b.hz, Q_BUTTERWORTH_F32)),
+            self.high_shelf
+                .map(|b| (Type::HighShelf(b.db), b.hz, Q_BUTTERWORTH_F32)),
             self.peak.map(|b| (Type::PeakingEQ(b.db), b.hz, 1.0)),
-            self.high_pass_hz.map(|hz| (Type::HighPass, hz, Q_BUTTERWORTH_F32)),
+            self.high_pass_hz
+                .map(|hz| (Type::HighPass, hz, Q_BUTTERWORTH_F32)),
             // Two low-pass sections: a 4th-order band limit, as steep as a resampler's.
             self.band_limit_hz.map(|hz| (Type::LowPass, hz, 0.541)),
             self.band_limit_hz.map(|hz| (Type::LowPass, hz, 1.307)),
@@ -328,14 +331,18 @@ mod tests {
             .0;
         assert_eq!(peak, rate as usize / 2);
         assert!(s.iter().all(|x| x.is_finite()));
-        assert!(s[..rate as usize / 2].iter().any(|&x| x != 0.0), "noise before the click");
+        assert!(
+            s[..rate as usize / 2].iter().any(|&x| x != 0.0),
+            "noise before the click"
+        );
     }
 
     #[test]
     fn drawn_conditions_vary_and_stay_finite() {
         let mut rng = Rng::new(7);
-        let drawn: Vec<RecordingCondition> =
-            (0..40).map(|_| RecordingCondition::draw(&mut rng)).collect();
+        let drawn: Vec<RecordingCondition> = (0..40)
+            .map(|_| RecordingCondition::draw(&mut rng))
+            .collect();
         assert!(drawn.iter().any(|c| c.reverb.is_some()));
         assert!(drawn.iter().any(|c| c.reverb.is_none()));
         assert!(drawn.iter().any(|c| c.band_limit_hz == Some(7_800.0)));

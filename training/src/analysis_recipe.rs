@@ -160,8 +160,7 @@ impl AnalysisRecipe {
         let d = &self.downbeats;
         if d.steps == 0 || d.batch == 0 || d.hidden.is_empty() || d.hidden.contains(&0) {
             return Err(
-                "downbeats: steps and batch must be at least 1, hidden a list of widths ≥ 1"
-                    .into(),
+                "downbeats: steps and batch must be at least 1, hidden a list of widths ≥ 1".into(),
             );
         }
         if !(d.input_noise.is_finite() && d.input_noise >= 0.0) {
@@ -178,7 +177,9 @@ impl AnalysisRecipe {
 
 fn check_songs(name: &str, songs: &[SongFolder]) -> Result<(), String> {
     if songs.is_empty() {
-        return Err(format!("{name}: a recipe needs at least one [[{name}.songs]] pool"));
+        return Err(format!(
+            "{name}: a recipe needs at least one [[{name}.songs]] pool"
+        ));
     }
     for s in songs {
         if s.folders.is_empty() {

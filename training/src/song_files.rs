@@ -85,7 +85,9 @@ pub fn annotated_songs(folder: &Path) -> Result<Vec<PathBuf>> {
     let mut found = Vec::new();
     for entry in dir {
         let p = entry?.path();
-        if is_audio(&p) && p.with_extension("beats").exists() && !offline::real_music::is_held_out(&p)
+        if is_audio(&p)
+            && p.with_extension("beats").exists()
+            && !offline::real_music::is_held_out(&p)
         {
             found.push(p);
         }

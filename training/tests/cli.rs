@@ -210,13 +210,11 @@ fn the_analysis_networks_train_by_a_recipe_and_the_analysis_reads_them() {
         dsp::DownbeatNetEnsemble::from_bytes(&std::fs::read(&downbeats).unwrap()).unwrap();
     assert_eq!(ensemble.nets.len(), 3);
     // A folder that is missing is named, with where to look for how to make it.
-    let missing = std::fs::read_to_string(&recipe_file)
-        .unwrap()
-        .replacen(
-            &format!("folders = [{synth:?}"),
-            "folders = [\"no-such-folder\"",
-            1,
-        );
+    let missing = std::fs::read_to_string(&recipe_file).unwrap().replacen(
+        &format!("folders = [{synth:?}"),
+        "folders = [\"no-such-folder\"",
+        1,
+    );
     std::fs::write(&recipe_file, missing).unwrap();
     let out = danced_train()
         .args(["beats", "--check", "1", "--recipe"])
@@ -225,5 +223,8 @@ fn the_analysis_networks_train_by_a_recipe_and_the_analysis_reads_them() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(stderr.contains("no-such-folder") && stderr.contains("recipe"), "{stderr}");
+    assert!(
+        stderr.contains("no-such-folder") && stderr.contains("recipe"),
+        "{stderr}"
+    );
 }

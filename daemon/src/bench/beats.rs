@@ -259,7 +259,10 @@ pub fn mean(scores: &[ItemScore], f: impl Fn(&ItemScore) -> f64) -> f64 {
 pub fn level_and_timing(scores: &[ItemScore]) -> String {
     let ok: Vec<&ItemScore> = scores.iter().filter(|s| s.error.is_none()).collect();
     let count = |l| ok.iter().filter(|s| s.level == l).count();
-    let offsets: Vec<f64> = ok.iter().flat_map(|s| s.offsets_s.iter().copied()).collect();
+    let offsets: Vec<f64> = ok
+        .iter()
+        .flat_map(|s| s.offsets_s.iter().copied())
+        .collect();
     let late: usize = ok.iter().map(|s| s.late_beats).sum();
     let all: usize = ok.iter().map(|s| s.beats).sum();
     format!(
