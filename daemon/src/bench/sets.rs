@@ -167,10 +167,10 @@ pub fn real_music_sets(data: &Path) -> [BenchSet; 2] {
         })
         .collect();
     let (mut held_out, mut train) = (Vec::new(), Vec::new());
-    for p in sorted_dir(&dir) {
-        if !p.extension().is_some_and(|e| e == "flac") {
-            continue;
-        }
+    for p in sorted_dir(&dir)
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "flac"))
+    {
         let Some(mut item) = counted_item(&p) else {
             continue;
         };
