@@ -65,9 +65,15 @@ if not hasattr(np, "int"): np.int = int
 # The shared data's evaluation set, beside the repository (this file is tools/real_music/...).
 SHARED_TSV = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "..",
                           "shared", "data", "real-music", "tracks.tsv")
-# Packages of the evaluation set that are held out completely.
-HELD_OUT = {"flare-game", "fretsonfire-songs-sectoid", "hyperrogue-music", "megaglest-data",
-            "nexuiz-music", "rrootage-data", "supertux-data", "warzone2100-music"}
+# Packages of the evaluation set that are held out completely: read from the Rust source that
+# every training run and bench uses (offline::real_music::HELD_OUT_SOURCES), so the two agree.
+def _held_out_sources():
+    src = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "offline", "src",
+                       "real_music.rs")
+    text = open(src, encoding="utf-8").read()
+    block = re.search(r"HELD_OUT_SOURCES: \[&str; \d+\] = \[(.*?)\];", text, re.S).group(1)
+    return set(re.findall(r'"([^"]+)"', block))
+HELD_OUT = _held_out_sources()
 # Debian 12 main packages, roughly best-yield first.  Skipped after inspection (see README):
 # tracker-module / MIDI sources (fb-music-high, pingus-data, ri-li-data, planetblupi-*, freedink-data,
 # tomatoes-data), packages without full-length music (openarena-data, trigger-rally-data, 0ad-data,
