@@ -8,10 +8,10 @@
 
 use std::path::Path;
 
-/// Sources whose recordings are held out of every training run (`tools/real_music/build_extra.py`
-/// reads this list too): chosen once (every third of
+/// Sources whose recordings are held out of every training run, chosen once (every third of
 /// `data/real-music`'s 24 sources in name order, from the second) for a spread of orchestral,
-/// live-band rock, world music in 3/4, electronic, pop and reggae; 15 of its 50 clips.
+/// live-band rock, world music in 3/4, electronic, pop and reggae: 15 of its 50 clips.
+/// `tools/real_music/build_extra.py` reads this list too.
 pub const HELD_OUT_SOURCES: [&str; 8] = [
     "flare-game",
     "fretsonfire-songs-sectoid",
