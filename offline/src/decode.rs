@@ -47,6 +47,15 @@ impl DecodedAudio {
     }
 }
 
+/// Mono mix (the channels' mean) of interleaved `samples` of `channels` channels.
+pub fn mono_mix(samples: &[f32], channels: u16) -> Vec<f32> {
+    let ch = usize::from(channels.max(1));
+    samples
+        .chunks_exact(ch)
+        .map(|f| f.iter().sum::<f32>() / ch as f32)
+        .collect()
+}
+
 /// Streaming decoder for one file: yields the default audio track one packet at a time.
 pub struct AudioFileReader {
     path: PathBuf,

@@ -6,6 +6,7 @@
 
 use dsp::FeatureFrame;
 use model::rig::{JOINT_COUNT, Pose, Skeleton};
+use offline::decode::mono_mix;
 
 /// Two songs joined on a beat: the first up to `cut_s`, then the second from one of its beats.
 #[derive(Clone, Debug)]
@@ -18,15 +19,6 @@ pub struct Splice {
     pub beats: Vec<f64>,
     /// Where the second song starts, seconds.
     pub cut_s: f64,
-}
-
-/// Mono mix of interleaved `samples` of `channels` channels.
-pub fn mono(samples: &[f32], channels: u16) -> Vec<f32> {
-    let ch = usize::from(channels.max(1));
-    samples
-        .chunks_exact(ch)
-        .map(|f| f.iter().sum::<f32>() / ch as f32)
-        .collect()
 }
 
 /// The beat of `beats` nearest `t_s`.
@@ -48,7 +40,7 @@ pub fn splice(
     cut_near_s: f64,
     resume_near_s: f64,
 ) -> Option<Splice> {
-    let (a_mono, b_mono) = (mono(a.0, a.1), mono(b.0, b.1));
+    let (a_mono, b_mono) = (mono_mix(a.0, a.1), mono_mix(b.0, b.1));
     let cut = nearest(a.2, cut_near_s)?;
     let resume = nearest(b.2, resume_near_s)?;
     let r = f64::from(rate);

@@ -6,7 +6,7 @@ use dsp::BeatTrackerKind;
 use dsp::metrics::{self, BEAT_TOLERANCE_S, ONSET_TOLERANCE_S};
 use offline::analysis::{AnalyzeOptions, FileAnalysis, analyze_file};
 
-use super::sets::{BenchItem, BenchSet};
+use super::sets::{BenchItem, BenchSet, median_tempo_bpm};
 
 /// A beat counts only if the tracker committed to it no later than this after it happened.
 pub const MAX_DECISION_LAG_S: f64 = 0.05;
@@ -87,16 +87,6 @@ impl MetricalLevel {
     }
 }
 
-/// Median tempo of a beat sequence, BPM (0 for fewer than two beats).
-fn median_ibi_tempo(beats: &[f64]) -> f64 {
-    let mut ibi: Vec<f64> = beats.windows(2).map(|w| w[1] - w[0]).collect();
-    if ibi.is_empty() {
-        return 0.0;
-    }
-    ibi.sort_by(f64::total_cmp);
-    60.0 / ibi[ibi.len() / 2]
-}
-
 /// For each estimated beat within `tolerance` of a reference beat, its signed offset to the
 /// nearest one.
 fn offsets(reference: &[f64], estimated: &[f64], tolerance: f64) -> Vec<f64> {
@@ -152,7 +142,7 @@ pub fn score(item: &BenchItem, analysis: &FileAnalysis) -> ItemScore {
     let reference = metrics::trim_beats(&reference, item.skip_s);
     let estimated = metrics::trim_beats(&estimated, item.skip_s);
     let f_measure = metrics::beat_f_measure(&reference, &estimated, BEAT_TOLERANCE_S);
-    let level = MetricalLevel::of(median_ibi_tempo(&estimated), median_ibi_tempo(&reference));
+    let level = MetricalLevel::of(median_tempo_bpm(&estimated), median_tempo_bpm(&reference));
     let offsets_s = offsets(&reference, &estimated, BEAT_TOLERANCE_S);
     let c = metrics::continuity(&reference, &estimated);
     let downbeat_f = item.downbeats.as_ref().map(|r| {

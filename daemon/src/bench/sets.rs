@@ -304,12 +304,18 @@ pub fn by_reference_tempo(set: &BenchSet) -> Vec<(f64, &BenchItem)> {
         .items
         .iter()
         .filter(|i| i.downbeats.is_some() && i.beats.len() > 2)
-        .map(|i| {
-            let mut ibi: Vec<f64> = i.beats.windows(2).map(|w| w[1] - w[0]).collect();
-            ibi.sort_by(f64::total_cmp);
-            (60.0 / ibi[ibi.len() / 2], i)
-        })
+        .map(|i| (median_tempo_bpm(&i.beats), i))
         .collect();
     songs.sort_by(|a, b| a.0.total_cmp(&b.0));
     songs
+}
+
+/// Tempo of a beat sequence from its median beat interval, BPM (0 for fewer than two beats).
+pub fn median_tempo_bpm(beats: &[f64]) -> f64 {
+    let mut ibi: Vec<f64> = beats.windows(2).map(|w| w[1] - w[0]).collect();
+    if ibi.is_empty() {
+        return 0.0;
+    }
+    ibi.sort_by(f64::total_cmp);
+    60.0 / ibi[ibi.len() / 2]
 }

@@ -138,7 +138,7 @@ fn tempo_jumps(args: &BenchLagArgs, config: &Config) -> Result<()> {
             cases.push((
                 format!("{:.0} → {end_bpm:.0} BPM (in {})", info.bpm, item.name),
                 crate::bench::beat_recovery::Splice {
-                    samples: crate::bench::beat_recovery::mono(&a.samples, a.channels),
+                    samples: offline::decode::mono_mix(&a.samples, a.channels),
                     sample_rate: a.sample_rate,
                     beats: item.beats.clone(),
                     cut_s,
