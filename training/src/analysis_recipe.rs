@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::error::TrainingError;
+use crate::recipe::{parse_recipe, read_recipe_text};
 
 /// The shipped analysis networks' recipe, verbatim.
 pub const SHIPPED_ANALYSIS_RECIPE: &str = include_str!("../../configs/analysis.recipe.toml");
@@ -51,6 +52,13 @@ pub struct EnsembleSettings {
     pub seed: u64,
     /// Every this many songs of a pool, one is kept for validation (0: none).
     pub valid_every: usize,
+}
+
+impl EnsembleSettings {
+    /// The seed of ensemble member `member` (counting from 0).
+    pub fn member_seed(&self, member: usize) -> u64 {
+        self.seed + member as u64
+    }
 }
 
 /// The learned beat activation's recipe.
@@ -110,30 +118,17 @@ impl AnalysisRecipe {
             .expect("the shipped analysis recipe is valid (tested)")
     }
 
-    /// Reads and checks a recipe file; returns it with its text.
-    pub fn read(path: &Path) -> Result<(Self, String), TrainingError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| TrainingError::recipe(format!("cannot read {}: {e}", path.display())))?;
-        let recipe = Self::parse(&text, &path.display().to_string())?;
-        Ok((recipe, text))
-    }
-
-    /// The recipe in `path`, or the shipped one (with its text) when there is none.
-    pub fn read_or_shipped(path: Option<&Path>) -> Result<(Self, String), TrainingError> {
+    /// The recipe in `path`, or the shipped one when there is none.
+    pub fn read_or_shipped(path: Option<&Path>) -> Result<Self, TrainingError> {
         match path {
-            Some(p) => Self::read(p),
-            None => Ok((Self::shipped(), SHIPPED_ANALYSIS_RECIPE.to_string())),
+            Some(p) => Self::parse(&read_recipe_text(p)?, &p.display().to_string()),
+            None => Ok(Self::shipped()),
         }
     }
 
     /// Parses and checks a recipe's text; `origin` names it in errors.
     pub fn parse(text: &str, origin: &str) -> Result<Self, TrainingError> {
-        let recipe: Self =
-            toml::from_str(text).map_err(|e| TrainingError::recipe(format!("{origin}: {e}")))?;
-        recipe
-            .check()
-            .map_err(|e| TrainingError::recipe(format!("{origin}: {e}")))?;
-        Ok(recipe)
+        parse_recipe(text, origin, Self::check)
     }
 
     fn check(&self) -> Result<(), String> {

@@ -205,6 +205,8 @@ fn normalise_channels_first(rows: &[f32], mean: &[f32], std: &[f32], out: &mut [
 
 /// Draws a pool by share, then a song of it.
 fn draw_song<'a>(pools: &'a [SongPool], rng: &mut Rng) -> &'a BeatSong {
+    // A lone pool draws no share, so a one-pool recipe cuts the batches the trainer cut before
+    // there were pools (the shipped activation's recipe is one pool).
     if let [pool] = pools {
         return &pool.songs[rng.below(pool.songs.len())];
     }

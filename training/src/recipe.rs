@@ -7,8 +7,27 @@
 use std::path::Path;
 
 use serde::Deserialize;
+use serde::de::DeserializeOwned;
 
 use crate::error::TrainingError;
+
+/// A recipe file's text, or an error naming the file.
+pub(crate) fn read_recipe_text(path: &Path) -> Result<String, TrainingError> {
+    std::fs::read_to_string(path)
+        .map_err(|e| TrainingError::recipe(format!("cannot read {}: {e}", path.display())))
+}
+
+/// Parses a recipe's TOML and checks its ranges with `check`; `origin` names it in errors.
+pub(crate) fn parse_recipe<R: DeserializeOwned>(
+    text: &str,
+    origin: &str,
+    check: impl Fn(&R) -> Result<(), String>,
+) -> Result<R, TrainingError> {
+    let recipe: R =
+        toml::from_str(text).map_err(|e| TrainingError::recipe(format!("{origin}: {e}")))?;
+    check(&recipe).map_err(|e| TrainingError::recipe(format!("{origin}: {e}")))?;
+    Ok(recipe)
+}
 
 /// The shipped neural dancer's recipe, verbatim.
 pub const SHIPPED_DANCER_RECIPE: &str = include_str!("../../configs/models/default.recipe.toml");
@@ -167,20 +186,14 @@ impl DancerRecipe {
 
     /// Reads and checks a recipe file.
     pub fn read(path: &Path) -> Result<(Self, String), TrainingError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| TrainingError::recipe(format!("cannot read {}: {e}", path.display())))?;
+        let text = read_recipe_text(path)?;
         let recipe = Self::parse(&text, &path.display().to_string())?;
         Ok((recipe, text))
     }
 
     /// Parses and checks a recipe's text; `origin` names it in errors.
     pub fn parse(text: &str, origin: &str) -> Result<Self, TrainingError> {
-        let recipe: DancerRecipe =
-            toml::from_str(text).map_err(|e| TrainingError::recipe(format!("{origin}: {e}")))?;
-        recipe
-            .check()
-            .map_err(|e| TrainingError::recipe(format!("{origin}: {e}")))?;
-        Ok(recipe)
+        parse_recipe(text, origin, Self::check)
     }
 
     /// Every setting within its range, naming the first that is not.

@@ -25,14 +25,17 @@ pub struct SongHearing {
     pub validation: bool,
 }
 
+/// Songs per folder a quick check of a recipe analyses.
+const CHECK_SONGS_PER_FOLDER: usize = 3;
+
 /// Every hearing of every song of `folders`: each training song as it is and through
 /// `copies` drawn conditions, each validation song as it is. Recordings of held-out sources
-/// are left out; `limit` keeps only that many songs per folder (for quick checks).
+/// are left out; a quick `check` keeps the first [`CHECK_SONGS_PER_FOLDER`] of each folder.
 /// Validation songs are every `valid_every`-th of a pool, counting across its folders.
 pub fn hearings(
     folders: &[SongFolder],
     ensemble: &EnsembleSettings,
-    limit: Option<usize>,
+    check: bool,
 ) -> Result<Vec<SongHearing>> {
     let mut rng = Rng::new(ensemble.seed ^ 0x5eed_c0de);
     let mut out = Vec::new();
@@ -40,8 +43,8 @@ pub fn hearings(
         let mut songs = Vec::new();
         for dir in &folder.folders {
             let mut found = annotated_songs(dir)?;
-            if let Some(n) = limit {
-                found.truncate(n);
+            if check {
+                found.truncate(CHECK_SONGS_PER_FOLDER);
             }
             songs.extend(found);
         }
@@ -62,7 +65,7 @@ pub fn hearings(
                     audio: audio.clone(),
                     condition: Some(RecordingCondition::draw(&mut rng)),
                     pool: f,
-                    validation,
+                    validation: false,
                 });
             }
         }
@@ -107,12 +110,7 @@ pub fn analyse(hearing: &SongHearing, options: AnalyzeOptions) -> Result<FileAna
         Some(condition) => {
             let decoded = offline::decode::decode_file(audio)
                 .with_context(|| format!("decoding {}", audio.display()))?;
-            let channels = usize::from(decoded.channels.max(1));
-            let mut mono: Vec<f32> = decoded
-                .samples
-                .chunks_exact(channels)
-                .map(|f| f.iter().sum::<f32>() / channels as f32)
-                .collect();
+            let mut mono = offline::decode::mono_mix(&decoded.samples, decoded.channels);
             condition.apply(&mut mono, decoded.sample_rate);
             analyze_samples(
                 &audio.display().to_string(),

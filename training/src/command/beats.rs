@@ -31,7 +31,7 @@ pub struct TrainBeatsArgs {
     /// Songs analysed in parallel.
     #[arg(long, default_value_t = 2)]
     pub jobs: usize,
-    /// A quick check of the recipe: N steps per network on 3 songs per folder.
+    /// A quick check of the recipe: N steps per network on a few songs per folder.
     #[arg(long, hide = true)]
     pub check: Option<usize>,
 }
@@ -57,10 +57,9 @@ fn load_song(hearing: &SongHearing) -> Result<BeatSong> {
 
 /// Runs `danced-train beats`.
 pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
-    let (recipe, _) = AnalysisRecipe::read_or_shipped(args.recipe.as_deref())?;
+    let recipe = AnalysisRecipe::read_or_shipped(args.recipe.as_deref())?;
     let r = &recipe.beats;
-    let check_songs = args.check.map(|_| 3);
-    let hearings = hearings(&r.songs, &r.ensemble, check_songs)?;
+    let hearings = hearings(&r.songs, &r.ensemble, args.check.is_some())?;
     let t = Instant::now();
     let loaded = offline::pool::parallel_map(&hearings, args.jobs.max(1), load_song);
     let mut pools: Vec<SongPool> = r
@@ -105,7 +104,7 @@ pub fn train_beats(args: &TrainBeatsArgs) -> Result<()> {
     let mut nets = Vec::new();
     for member in 0..r.ensemble.members {
         let config = BeatTrainConfig {
-            seed: r.ensemble.seed + member as u64,
+            seed: r.ensemble.member_seed(member),
             ..config.clone()
         };
         nets.push(train_beat_activation(

@@ -37,7 +37,7 @@ pub struct TrainDownbeatsArgs {
     /// Songs analysed in parallel.
     #[arg(long, default_value_t = 2)]
     pub jobs: usize,
-    /// A quick check of the recipe: N steps per network on 3 songs per folder.
+    /// A quick check of the recipe: N steps per network on a few songs per folder.
     #[arg(long, hide = true)]
     pub check: Option<usize>,
 }
@@ -73,9 +73,9 @@ fn load_song(hearing: &SongHearing, networks: dsp::AnalysisNetworks) -> Result<L
 
 /// Runs `danced-train downbeats`.
 pub fn train_downbeats(args: &TrainDownbeatsArgs) -> Result<()> {
-    let (recipe, _) = AnalysisRecipe::read_or_shipped(args.recipe.as_deref())?;
+    let recipe = AnalysisRecipe::read_or_shipped(args.recipe.as_deref())?;
     let r = &recipe.downbeats;
-    let hearings = hearings(&r.songs, &r.ensemble, args.check.map(|_| 3))?;
+    let hearings = hearings(&r.songs, &r.ensemble, args.check.is_some())?;
     let t = Instant::now();
     let networks = offline::analysis::networks_from_files(args.beat_net.as_deref(), None)?;
     let loaded =
@@ -110,7 +110,7 @@ pub fn train_downbeats(args: &TrainDownbeatsArgs) -> Result<()> {
     let mut nets = Vec::new();
     for member in 0..r.ensemble.members {
         let config = DownbeatTrainConfig {
-            seed: r.ensemble.seed + member as u64,
+            seed: r.ensemble.member_seed(member),
             ..config.clone()
         };
         nets.push(train_downbeat_net(&train, &config, 500, |step, loss, w| {
