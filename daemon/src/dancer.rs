@@ -10,6 +10,7 @@ use model::neural::file::NeuralModel;
 use model::neural::safety::SafetyNets;
 use model::retrieval::{ClipLibrary, RetrievalDancer};
 use model::source::MotionSource;
+use model::stage::{StageSettings, StagedSource};
 
 /// The neural dance model shipped in the repository (`configs/models/default.dnn`).
 pub const SHIPPED_MODEL: &[u8] = include_bytes!("../../configs/models/default.dnn");
@@ -68,6 +69,20 @@ pub struct SourceSettings<'a> {
     pub network_only: bool,
     /// Where the neural dancer sends key poses (`None`: its default, the overlay).
     pub key_route: Option<model::source::KeyPoseRoute>,
+    /// Where on the floor it dances.
+    pub stage: StageSettings,
+}
+
+/// `source` on the stage `settings` describe (free: its motion exactly as made).
+pub fn on_stage<S: MotionSource + Send + 'static>(
+    source: S,
+    settings: StageSettings,
+) -> Box<dyn MotionSource + Send> {
+    Box::new(StagedSource::new(
+        source,
+        settings,
+        model::rig::Skeleton::default_adult(),
+    ))
 }
 
 /// Reads the neural model from `path`, or the shipped one when `path` is `None`.
@@ -117,13 +132,13 @@ pub fn check_style(source: &dyn MotionSource, style: model::style::StyleRequest)
     Ok(())
 }
 
-/// Opens the motion source `kind` with `settings`, seeded with `seed`.
+/// Opens the motion source `kind` with `settings`, seeded with `seed`, on its stage.
 pub fn open_source(
     kind: SourceKind,
     settings: &SourceSettings<'_>,
     seed: u64,
 ) -> Result<Box<dyn MotionSource + Send>> {
-    Ok(match kind {
+    let source: Box<dyn MotionSource + Send> = match kind {
         SourceKind::Neural => {
             if settings.library.is_some() {
                 bail!("a clip library is for the retrieval source, not the neural one");
@@ -142,7 +157,8 @@ pub fn open_source(
             let (library, _) = load_library(settings.library)?;
             Box::new(RetrievalDancer::new(library, seed).context("starting the retrieval dancer")?)
         }
-    })
+    };
+    Ok(on_stage(source, settings.stage))
 }
 
 /// The clip library shipped in the repository (`configs/clips/tang2018-train.danclips`).

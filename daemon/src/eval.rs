@@ -280,6 +280,15 @@ impl EvalSet {
         Ok(set)
     }
 
+    /// Each dance scored: its name, its captured poses and its music frames.
+    pub fn scored_dances(
+        &self,
+    ) -> impl Iterator<Item = (&str, &[Pose], &[[f32; dsp::feature::FEATURE_DIM]])> {
+        self.validation
+            .iter()
+            .map(|d| (d.name.as_str(), d.poses.as_slice(), d.music.as_slice()))
+    }
+
     /// Names of the validation dances scored.
     pub fn validation_names(&self) -> Vec<String> {
         self.validation.iter().map(|d| d.name.clone()).collect()

@@ -11,6 +11,7 @@ use daemon::command::bench_cues::{BenchCuesArgs, bench_cues};
 use daemon::command::bench_lag::{BenchLagArgs, bench_lag};
 use daemon::command::bench_live::{BenchLiveArgs, bench_live};
 use daemon::command::bench_model::{BenchModelArgs, bench_model};
+use daemon::command::bench_stage::{BenchStageArgs, bench_stage};
 use daemon::command::bvh_export::{BvhArgs, bvh_export};
 use daemon::command::dataset::{DatasetCommand, dataset};
 use daemon::command::demo::{DemoArgs, demo};
@@ -93,6 +94,8 @@ enum BenchCommand {
     Cues(BenchCuesArgs),
     /// Per-frame sampling time of the neural dancer on one thread (p50, p99).
     Model(BenchModelArgs),
+    /// How far each dancer wanders on each stage mode, and what keeping it on the stage costs.
+    Stage(BenchStageArgs),
 }
 
 fn main() -> Result<()> {
@@ -113,6 +116,7 @@ fn main() -> Result<()> {
             BenchCommand::Lag(args) => bench_lag(args),
             BenchCommand::Cues(args) => bench_cues(args),
             BenchCommand::Model(args) => bench_model(&args),
+            BenchCommand::Stage(args) => bench_stage(args),
         },
         Command::Generate(args) => generate(&args),
         Command::View(args) => view(&args),

@@ -20,6 +20,7 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
         beat_accent: None,
         foot_plant: None,
         key_route: None,
+        stage: Default::default(),
     };
     let a = analyze_samples(
         "demo",

@@ -4,7 +4,8 @@
 // the performer's controls back as the same OSC messages `/danced/control/...` takes over UDP.
 import {
   Scene, PerspectiveCamera, WebGLRenderer, Color, HemisphereLight, DirectionalLight, GridHelper,
-  Vector3, Quaternion, GLTFLoader, OrbitControls, VRMLoaderPlugin, VRMUtils,
+  Vector3, Quaternion, Mesh, RingGeometry, MeshBasicMaterial, DoubleSide, GLTFLoader,
+  OrbitControls, VRMLoaderPlugin, VRMUtils,
 } from './vendor.js';
 
 // ---- OSC (1.0): the subset danced sends and takes: bundles, i f d h s b T F N ----
@@ -253,9 +254,32 @@ function send(addr, args) {
 }
 state.send = send;
 
+// The stage the daemon keeps the dancer on: its edge drawn on the floor, the camera framing it.
+// Without one (free, or a dance file) the camera follows the dancer instead.
+let stageRing = null;
+function showStage(stage) {
+  if (stageRing) { scene.remove(stageRing); stageRing.geometry.dispose(); stageRing = null; }
+  state.stage = stage && stage.mode !== 'free' ? stage : null;
+  if (!state.stage) return;
+  const r = Math.max(stage.radius_m, 0.3);
+  stageRing = new Mesh(new RingGeometry(r - 0.02, r + 0.02, 96),
+    new MeshBasicMaterial({ color: 0x6a8cff, transparent: true, opacity: 0.6, side: DoubleSide }));
+  stageRing.rotation.x = -Math.PI / 2;
+  // Our x and z are the page's (the hips' position is turned back from Unity's the same way).
+  stageRing.position.set(stage.centre[0], 0.005, stage.centre[1]);
+  scene.add(stageRing);
+  // Frame the whole stage: the camera on the audience's side, far enough for its width.
+  const dir = stage.facing_deg * Math.PI / 180;
+  const distance = 5.6 * Math.max(1, (r + 0.4) / 1.9);
+  orbit.target.set(stage.centre[0], 0.95, stage.centre[1]);
+  camera.position.set(stage.centre[0] + Math.sin(dir) * distance, 1.5,
+    stage.centre[1] + Math.cos(dir) * distance);
+}
+
 function onHello(h) {
   state.hello = h;
   state.mode = h.mode;
+  showStage(h.stage);
   // What the dancer honours: the page offers no control that would be refused.
   const honours = h.controls ?? { style: true, key_route: true, beat_accent: true };
   document.body.classList.toggle('no-style', !honours.style);
@@ -379,7 +403,7 @@ window.addEventListener('drop', async (e) => {
   URL.revokeObjectURL(url);
 });
 
-// ---- Render loop: the camera follows the dancer ----
+// ---- Render loop: the camera frames the stage, or follows a dancer free to roam ----
 const follow = new Vector3();
 let lastRender = performance.now();
 function resize() {
@@ -397,7 +421,7 @@ function render(now) {
   if (vrm) {
     vrm.update(dt);
     const hips = vrm.humanoid.getRawBoneNode('hips');
-    if (hips) {
+    if (hips && !state.stage) {
       hips.getWorldPosition(follow);
       const dx = (follow.x - orbit.target.x) * Math.min(1, dt * 3);
       const dz = (follow.z - orbit.target.z) * Math.min(1, dt * 3);

@@ -22,6 +22,7 @@ pub mod retrieval;
 pub mod rig;
 pub mod rotation;
 pub mod source;
+pub mod stage;
 pub mod style;
 pub mod tang2018;
 pub mod tang_fit;

@@ -17,7 +17,7 @@ use crate::ModelError;
 use crate::key_overlay::{KEY_BLEND_FRAMES, KeyOverlay};
 use crate::motion::{heading, yaw};
 use crate::rig::{JOINT_COUNT, Pose};
-use crate::source::{Controls, MotionSource};
+use crate::source::{Controls, MotionSource, TravelPreference};
 
 /// Frame rate of the library and of the dancer's output (tang2018 fits are 25 fps).
 pub const RETRIEVAL_FPS: f64 = 25.0;
@@ -45,6 +45,10 @@ const W_STILL: f32 = 8.0;
 /// Without it, continuity of rotations alone happily chains a travelling step into a standing
 /// one: the dancer stops crossing the floor and the clip switches show up as root jerks.
 const W_VELOCITY: f32 = 2.0;
+/// Weight of a clip's travel against the stage's preferred direction, per metre the clip
+/// travels the other way at full strength (the edge of the stage). A beat's clip travels up
+/// to about 0.3 m, so at the edge an outward step costs about what a tempo off by 50 % does.
+const W_STAGE: f32 = 6.0;
 /// Duration of the offset decay at a clip switch, seconds.
 const BLEND_SECONDS: f32 = 0.25;
 /// Smoothing factor of the live energy (per frame, ≈ 0.4 s time constant at 25 fps).
@@ -317,6 +321,8 @@ pub struct RetrievalDancer {
     scratch: Pose,
     /// The key pose shown over the dance.
     overlay: KeyOverlay,
+    /// Where the stage would have the dance travel.
+    travel_preference: Option<TravelPreference>,
     /// Costs of the cheapest clips found at the last choice.
     best_cost: [f32; TOP_K],
     /// Indices of the cheapest clips found at the last choice.
@@ -361,6 +367,7 @@ impl RetrievalDancer {
             last_raw: Pose::rest(),
             scratch: Pose::rest(),
             overlay: KeyOverlay::default(),
+            travel_preference: None,
             best_cost: [f32::INFINITY; TOP_K],
             best_idx: [0; TOP_K],
         };
@@ -427,8 +434,9 @@ impl RetrievalDancer {
         wrapped
     }
 
-    /// The cost of playing `clip` next, given the last output's rotations (hips de-headed).
-    fn cost(&self, clip: &Clip, hips: Quat, velocity: Vec3) -> f32 {
+    /// The cost of playing `clip` next, given the last output's rotations (hips de-headed), its
+    /// velocity in its heading frame and the stage's preferred travel in that frame.
+    fn cost(&self, clip: &Clip, hips: Quat, velocity: Vec3, preferred: Option<Vec3>) -> f32 {
         let lib = &self.library;
         let mut c = W_POSE
             * pose_distance(
@@ -458,6 +466,11 @@ impl RetrievalDancer {
             let d = Vec3::new(played.x - velocity.x, 0.0, played.z - velocity.z);
             c += W_VELOCITY * d.length();
         }
+        if let Some(preferred) = preferred {
+            let travel = lib.poses[clip.start + clip.len].root_position
+                - lib.poses[clip.start].root_position;
+            c -= W_STAGE * travel.with_y(0.0).dot(preferred);
+        }
         c
     }
 
@@ -465,13 +478,19 @@ impl RetrievalDancer {
     fn choose(&mut self, controls: &Controls) -> usize {
         let hips = deheaded(self.last_out.local_rotations[0]);
         // Live root velocity in m/s, in the frame of the dancer's heading (as clips store it).
-        let velocity = yaw(-heading(self.last_out.local_rotations[0]))
+        let to_heading_frame = yaw(-heading(self.last_out.local_rotations[0]));
+        let velocity = to_heading_frame
             * (self.last_out.root_position - self.prev_out.root_position)
             * RETRIEVAL_FPS as f32;
+        let preferred = self.travel_preference.and_then(|p| {
+            let d = Vec3::new(p.direction[0], 0.0, p.direction[1]);
+            let w = crate::source::finite_clamp(p.strength, 0.0, 1.0);
+            (d.is_finite() && w > 0.0).then(|| to_heading_frame * d.normalize_or_zero() * w)
+        });
         self.best_cost = [f32::INFINITY; TOP_K];
         self.best_idx = [0; TOP_K];
         for i in 0..self.library.clips.len() {
-            let c = self.cost(&self.library.clips[i], hips, velocity);
+            let c = self.cost(&self.library.clips[i], hips, velocity, preferred);
             let c = if c.is_finite() { c } else { f32::MAX };
             if c >= self.best_cost[TOP_K - 1] {
                 continue;
@@ -663,11 +682,16 @@ impl MotionSource for RetrievalDancer {
         self.prev_out = Pose::rest();
         self.last_raw = Pose::rest();
         self.overlay.reset();
+        self.travel_preference = None;
     }
 
     fn reseed(&mut self, seed: u64) {
         // Only the next clip choices change; the clip playing and its blend carry on.
         self.rng = Rng::new(seed);
+    }
+
+    fn prefer_travel(&mut self, preference: Option<TravelPreference>) {
+        self.travel_preference = preference;
     }
 }
 

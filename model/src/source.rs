@@ -137,6 +137,17 @@ pub struct SourceReport {
     pub key_route: Option<KeyPoseRoute>,
     /// How often each of its safety nets acted since the last reset (`None`: it has none).
     pub safety: Option<crate::neural::safety::SafetyCounts>,
+    /// What the stage did since the last reset (`None`: not on a stage).
+    pub stage: Option<crate::stage::StageCounts>,
+}
+
+/// Where the stage would have the dancer travel, in the source's own floor frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TravelPreference {
+    /// Unit direction on the floor (x, z) the dance should rather go.
+    pub direction: [f32; 2],
+    /// How much it matters, 0–1 (1: at the edge of the stage).
+    pub strength: f32,
 }
 
 /// A streaming, causal motion generator driven by music feature frames.
@@ -175,6 +186,49 @@ pub trait MotionSource {
     /// dance goes on from where the dancer stands (no restart, no jump); never allocates and
     /// costs no more than a step, so it can run on the real-time thread between two steps.
     fn reseed(&mut self, seed: u64);
+
+    /// Hears where the stage would have the dance travel from now on (`None`: anywhere). A
+    /// source that chooses its steps may prefer those going that way; the others ignore it.
+    fn prefer_travel(&mut self, _preference: Option<TravelPreference>) {}
+}
+
+/// A boxed source is a source (so a stage can hold whichever the daemon opened).
+impl<S: MotionSource + ?Sized> MotionSource for Box<S> {
+    fn frame_rate(&self) -> f64 {
+        (**self).frame_rate()
+    }
+
+    fn lookahead_frames(&self) -> usize {
+        (**self).lookahead_frames()
+    }
+
+    fn horizon_frames(&self) -> usize {
+        (**self).horizon_frames()
+    }
+
+    fn step(&mut self, music: &[[f32; FEATURE_DIM]], controls: &Controls, out: &mut Pose) {
+        (**self).step(music, controls, out)
+    }
+
+    fn reset(&mut self, seed: u64) {
+        (**self).reset(seed)
+    }
+
+    fn controls(&self) -> SourceControls {
+        (**self).controls()
+    }
+
+    fn report(&self) -> SourceReport {
+        (**self).report()
+    }
+
+    fn reseed(&mut self, seed: u64) {
+        (**self).reseed(seed)
+    }
+
+    fn prefer_travel(&mut self, preference: Option<TravelPreference>) {
+        (**self).prefer_travel(preference)
+    }
 }
 
 /// `x` clamped to `lo..=hi`; a non-finite `x` (a NaN from a controller, say) reads as 0.

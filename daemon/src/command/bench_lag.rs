@@ -272,6 +272,7 @@ fn source_settings(kind: SourceKind, config: &Config) -> SourceSettings<'_> {
         beat_accent: Some(config.dancer.beat_accent),
         foot_plant: Some(config.dancer.foot_plant),
         key_route: Some(config.dancer.key_pose_route()),
+        stage: config.stage.settings(),
     }
 }
 

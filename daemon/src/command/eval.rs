@@ -49,6 +49,20 @@ pub struct EvalArgs {
     /// Worker threads for loading.
     #[arg(long, default_value_t = 2)]
     pub jobs: usize,
+    /// Where on the floor the dancers dance: bounded (the default stage, 1.5 m), in_place or
+    /// free (their own motion, untouched).
+    #[arg(long, default_value = "bounded", value_parser = crate::command::source::parse_stage_mode)]
+    pub stage: String,
+}
+
+impl EvalArgs {
+    /// The stage the dancers dance on.
+    fn stage(&self) -> model::stage::StageSettings {
+        model::stage::StageSettings {
+            mode: model::stage::StageMode::parse(&self.stage).unwrap_or_default(),
+            ..Default::default()
+        }
+    }
 }
 
 const NO_ACCENT: &str = "neural, no beat accent";
@@ -85,28 +99,33 @@ fn sources(
             crate::dancer::training_library(&o.data, o.jobs)?.0,
         ));
     }
+    let stage = o.stage();
+    let staged = |s| -> Box<dyn MotionSource> { crate::dancer::on_stage(s, stage) };
     let mut sources: Vec<(String, Box<dyn MotionSource>)> = Vec::new();
     for (name, lib) in libraries {
-        sources.push((name.to_string(), Box::new(crate::eval::retrieval(lib)?)));
+        sources.push((
+            name.to_string(),
+            crate::dancer::on_stage(crate::eval::retrieval(lib)?, stage),
+        ));
     }
-    sources.push(("neural".into(), Box::new(eval_dancer(o, model)?)));
+    sources.push(("neural".into(), staged(eval_dancer(o, model)?)));
     // Ablations: the network's own timing, a fresh noise draw every frame, free feet.
     let mut own_timing = eval_dancer(o, model)?;
     own_timing.set_beat_accent(0.0);
-    sources.push((NO_ACCENT.into(), Box::new(own_timing)));
+    sources.push((NO_ACCENT.into(), staged(own_timing)));
     let mut fresh_noise = eval_dancer(o, model)?;
     fresh_noise.set_noise_correlation(0.0);
-    sources.push((FRESH_NOISE.into(), Box::new(fresh_noise)));
+    sources.push((FRESH_NOISE.into(), staged(fresh_noise)));
     let mut free_feet = eval_dancer(o, model)?;
     free_feet.set_safety_nets(model::neural::safety::SafetyNets {
         foot_lock: false,
         ..model::neural::safety::SafetyNets::SHIPPED
     });
-    sources.push((NO_FOOT_LOCK.into(), Box::new(free_feet)));
+    sources.push((NO_FOOT_LOCK.into(), staged(free_feet)));
     // The network alone: every safety net off but the non-finite guard.
     let mut alone = eval_dancer(o, model)?;
     alone.set_safety_nets(model::neural::safety::SafetyNets::NETWORK_ONLY);
-    sources.push((NETWORK_ONLY.into(), Box::new(alone)));
+    sources.push((NETWORK_ONLY.into(), staged(alone)));
     Ok(sources)
 }
 
@@ -120,10 +139,10 @@ fn training_songs_table(o: &EvalArgs, temperatures: &[f32], started: Instant) ->
         started.elapsed().as_secs_f64()
     );
     let model = crate::dancer::load_model(o.model.as_deref())?;
-    let mut dancer = eval_dancer(o, &model)?;
+    let mut dancer = crate::dancer::on_stage(eval_dancer(o, &model)?, o.stage());
     let mut rows = vec![set.score("ground truth, training dances", &set.ground_truth())?];
     for &t in temperatures {
-        let (motions, _) = set.generate(&mut dancer, t, o.seed);
+        let (motions, _) = set.generate(dancer.as_mut(), t, o.seed);
         rows.push(set.score(&format!("neural T={t}, training songs"), &motions)?);
     }
     print!("{}", crate::eval::table(&rows));

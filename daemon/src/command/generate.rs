@@ -109,6 +109,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     let lead_frames = (keypose_lead.max(0.0) * fps).round() as usize;
     let mut config = Config::default();
     source_args.apply(&mut config);
+    config.validate("command line")?;
     let style = config.dancer.style_request();
     let kind = if data.is_some() {
         SourceKind::Retrieval
@@ -128,16 +129,19 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         foot_plant: Some(config.dancer.foot_plant),
         network_only: *network_only,
         key_route: Some(config.dancer.key_pose_route()),
+        stage: config.stage.settings(),
     };
     let started = Instant::now();
+    let stage = settings.stage;
     let mut dancer: Box<dyn MotionSource> = match (kind, data) {
         // The full library, cut from the training split now (slow, needs ../shared).
-        (SourceKind::Retrieval, Some(data)) => Box::new(
+        (SourceKind::Retrieval, Some(data)) => crate::dancer::on_stage(
             model::retrieval::RetrievalDancer::new(
                 crate::dancer::training_library(data, 2)?.0,
                 seed,
             )
             .context("starting the retrieval dancer")?,
+            stage,
         ),
         (SourceKind::Neural, _) if seed_pose.is_some() => {
             let mut d = crate::dancer::configured_neural_dancer(&settings, seed)?;
@@ -147,7 +151,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
                 ));
                 d.reset(seed);
             }
-            Box::new(d)
+            crate::dancer::on_stage(d, stage)
         }
         _ => crate::dancer::open_source(kind, &settings, seed)?,
     };
@@ -212,7 +216,22 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
         load_s,
         1e6 * step_s / poses.len().max(1) as f64
     );
-    if let Some(c) = dancer.report().safety {
+    let report = dancer.report();
+    if let Some(c) = report
+        .stage
+        .filter(|_| stage.mode != model::stage::StageMode::Free)
+    {
+        println!(
+            "stage ({}, radius {} m): steered {:.1} % of frames, glided back {:.1} %, clamped {:.2} %, turning at most {:.0}°/s",
+            stage.mode.name(),
+            stage.radius_m,
+            100.0 * c.steered as f64 / c.frames.max(1) as f64,
+            100.0 * c.glided as f64 / c.frames.max(1) as f64,
+            100.0 * c.clamped as f64 / c.frames.max(1) as f64,
+            c.max_turn_deg_per_s
+        );
+    }
+    if let Some(c) = report.safety {
         let nets = if *network_only {
             "network only (nets off)"
         } else {

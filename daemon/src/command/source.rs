@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use crate::dancer::SourceKind;
 use crate::live::config::Config;
 
-/// Which dancer, and from which files.
+/// Which dancer, from which files, and where on the floor it dances.
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct SourceArgs {
     /// Motion source (default: the configuration's, else the built-in default).
@@ -27,6 +27,38 @@ pub struct SourceArgs {
     /// network (the network dances to them itself).
     #[arg(long, value_parser = parse_key_route)]
     pub key_route: Option<String>,
+    /// Where on the floor it dances: bounded (within --stage-radius of the centre, turning back
+    /// before the edge), in_place (the hips' travel removed) or free (wherever the dance goes).
+    #[arg(long, value_parser = parse_stage_mode)]
+    pub stage: Option<String>,
+    /// Radius of the stage, metres (default 1.5).
+    #[arg(long)]
+    pub stage_radius: Option<f32>,
+    /// Centre of the stage on the floor, metres: X,Z (e.g. 0,-1).
+    #[arg(long, value_parser = parse_centre, allow_hyphen_values = true)]
+    pub stage_centre: Option<[f32; 2]>,
+    /// Direction the audience is in, degrees about the vertical (0: +z, towards the view's
+    /// camera; 90: +x).
+    #[arg(long, allow_hyphen_values = true)]
+    pub stage_facing: Option<f32>,
+}
+
+/// Reads a stage mode's name (for clap).
+pub fn parse_stage_mode(s: &str) -> Result<String, String> {
+    model::stage::StageMode::parse(s)
+        .map(|m| m.name().to_string())
+        .ok_or_else(|| format!("{s:?}: expected bounded, in_place or free"))
+}
+
+fn parse_centre(s: &str) -> Result<[f32; 2], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    match parts.as_slice() {
+        [x, z] => match (x.parse::<f32>(), z.parse::<f32>()) {
+            (Ok(x), Ok(z)) if x.is_finite() && z.is_finite() => Ok([x, z]),
+            _ => Err(format!("{s:?}: expected two numbers X,Z in metres")),
+        },
+        _ => Err(format!("{s:?}: expected X,Z in metres, e.g. 0,-1")),
+    }
 }
 
 fn parse_key_route(s: &str) -> Result<String, String> {
@@ -74,6 +106,18 @@ impl SourceArgs {
         }
         if let Some(r) = &self.key_route {
             config.dancer.key_route = r.clone();
+        }
+        if let Some(m) = &self.stage {
+            config.stage.mode = m.clone();
+        }
+        if let Some(r) = self.stage_radius {
+            config.stage.radius_m = r;
+        }
+        if let Some(c) = self.stage_centre {
+            config.stage.centre = c;
+        }
+        if let Some(f) = self.stage_facing {
+            config.stage.facing_deg = f;
         }
     }
 }

@@ -3,6 +3,7 @@
 //! names the file and the key.
 
 use model::source::KeyPoseRoute;
+use model::stage::{MIN_RADIUS_M, StageMode, StageSettings};
 use model::style::StyleRequest;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -56,6 +57,8 @@ pub struct Config {
     pub control: ControlConfig,
     /// The dancer.
     pub dancer: DancerConfig,
+    /// Where on the floor it dances.
+    pub stage: StageConfig,
     /// The browser view.
     pub view: ViewConfig,
     /// Write the run's stats here as JSON when it ends.
@@ -233,6 +236,47 @@ impl Default for ViewConfig {
     }
 }
 
+/// `[stage]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct StageConfig {
+    /// `bounded` (the hips stay within `radius_m` of the centre: the dance turns back before
+    /// the edge), `in_place` (the hips' travel removed) or `free` (wherever the dance goes).
+    pub mode: String,
+    /// Radius of the stage, metres.
+    pub radius_m: f32,
+    /// Centre of the stage on the floor, metres: [x (sideways), z (towards the audience)].
+    pub centre: [f32; 2],
+    /// Direction the audience is in, degrees about the vertical: 0 = +z (towards the view's
+    /// camera and an avatar app's default), 90 = +x.
+    pub facing_deg: f32,
+}
+
+impl Default for StageConfig {
+    fn default() -> Self {
+        let s = StageSettings::default();
+        Self {
+            mode: s.mode.name().into(),
+            radius_m: s.radius_m,
+            centre: s.centre,
+            facing_deg: s.facing_deg,
+        }
+    }
+}
+
+impl StageConfig {
+    /// The stage asked for (a validated configuration always names a mode; anything else
+    /// reads as bounded).
+    pub fn settings(&self) -> StageSettings {
+        StageSettings {
+            mode: StageMode::parse(&self.mode).unwrap_or_default(),
+            radius_m: self.radius_m,
+            centre: self.centre,
+            facing_deg: self.facing_deg,
+        }
+    }
+}
+
 /// `[dancer]`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -400,6 +444,40 @@ impl Config {
                 ),
             ));
         }
+        if StageMode::parse(&self.stage.mode).is_none() {
+            return Err(bad(
+                "stage.mode",
+                format!("= {:?}: must be bounded, in_place or free", self.stage.mode),
+            ));
+        }
+        let r = self.stage.radius_m;
+        if !(r.is_finite() && (MIN_RADIUS_M..=100.0).contains(&r)) {
+            return Err(bad(
+                "stage.radius_m",
+                format!("= {r}: must be in {MIN_RADIUS_M}..=100 m"),
+            ));
+        }
+        if !self
+            .stage
+            .centre
+            .iter()
+            .all(|c| c.is_finite() && c.abs() <= 1000.0)
+        {
+            return Err(bad(
+                "stage.centre",
+                format!(
+                    "= {:?}: must be two finite metres within ±1000",
+                    self.stage.centre
+                ),
+            ));
+        }
+        let f = self.stage.facing_deg;
+        if !(f.is_finite() && (-360.0..=360.0).contains(&f)) {
+            return Err(bad(
+                "stage.facing_deg",
+                format!("= {f}: must be in -360..=360 degrees"),
+            ));
+        }
         if let Some(list) = &self.audio.channels {
             let max = super::input_mix::MAX_INPUT_CHANNELS;
             let mut seen = std::collections::BTreeSet::new();
@@ -532,6 +610,32 @@ mod tests {
         );
         let e = Config::parse("[dancer]\nkey_route = \"both\"\n", Path::new("x.toml")).unwrap_err();
         assert!(e.to_string().contains("dancer.key_route"), "{e}");
+    }
+
+    #[test]
+    fn stage_is_checked() {
+        let c = Config::parse(
+            "[stage]\nmode = \"in-place\"\nradius_m = 2.5\ncentre = [1.0, -2.0]\nfacing_deg = 90\n",
+            Path::new("x.toml"),
+        )
+        .unwrap();
+        let s = c.stage.settings();
+        assert_eq!(s.mode, StageMode::InPlace);
+        assert_eq!(
+            (s.radius_m, s.centre, s.facing_deg),
+            (2.5, [1.0, -2.0], 90.0)
+        );
+        assert_eq!(Config::default().stage.settings(), StageSettings::default());
+        for (bad, key) in [
+            ("mode = \"roam\"", "stage.mode"),
+            ("radius_m = 0.1", "stage.radius_m"),
+            ("radius_m = nan", "stage.radius_m"),
+            ("centre = [0.0, inf]", "stage.centre"),
+            ("facing_deg = 720", "stage.facing_deg"),
+        ] {
+            let e = Config::parse(&format!("[stage]\n{bad}\n"), Path::new("x.toml")).unwrap_err();
+            assert!(e.to_string().contains(key), "{bad}: {e}");
+        }
     }
 
     #[test]

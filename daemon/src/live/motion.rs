@@ -218,8 +218,12 @@ pub fn run(
             .processing
             .record_s(now_ns.saturating_sub(msg.ingest_wall_ns) as f64 * 1e-9);
         stats.model_frames.fetch_add(1, Ordering::Relaxed);
-        if let Some(c) = source.report().safety {
+        let report = source.report();
+        if let Some(c) = report.safety {
             stats.safety.store(&c);
+        }
+        if let Some(c) = report.stage {
+            stats.stage.store(&c);
         }
         next_time = t + 1.0 / rate;
         window.remove(0);

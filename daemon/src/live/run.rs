@@ -95,6 +95,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             beat_accent: None,
             foot_plant: Some(config.dancer.foot_plant),
             key_route: Some(config.dancer.key_pose_route()),
+            stage: config.stage.settings(),
         },
         config.dancer.seed,
     )?;
@@ -117,6 +118,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             model_rate_hz: source.frame_rate(),
             lead_ms: config.output.lead_ms,
             controls: source.controls(),
+            stage: Some(config.stage.settings().sanitized()),
             ..ViewHello::default()
         };
         let feed = LiveFeed {
@@ -259,7 +261,7 @@ pub fn summary(r: &StatsReport) -> String {
          queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
          packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
          controls     {} applied, {} rejected, {} not honoured by the dancer, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
-         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}{}",
+         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}{}{}",
         r.wall_s,
         r.frames_sent,
         r.frames_sent as f64 / r.wall_s.max(1e-9),
@@ -326,6 +328,12 @@ pub fn summary(r: &StatsReport) -> String {
         r.midi_queue_full,
         r.safety_nets
             .map(|c| format!("\nsafety nets  {}", c.summary()))
+            .unwrap_or_default(),
+        r.stage
+            .map(|c| format!(
+                "\nstage        of {} frames {} steered, {} glided back, {} clamped; turning at most {:.0}°/s",
+                c.frames, c.steered, c.glided, c.clamped, c.max_turn_deg_per_s
+            ))
             .unwrap_or_default(),
         r.view
             .map(|v| view_summary(&v, r.wall_s))

@@ -27,6 +27,7 @@ use serde::Serialize;
 use crate::alloc_counter::RtThread;
 use model::neural::safety::SafetyCounts;
 use model::source::KeyPoseRoute;
+use model::stage::StageCounts;
 
 /// Allocations (and frees) counted per real-time thread since the process started.
 #[derive(Clone, Copy, Debug, Default, Serialize, PartialEq, Eq)]
@@ -245,6 +246,8 @@ pub struct Stats {
     pub key_route: AtomicU32,
     /// What the dancer's safety nets did (neural dancer only).
     pub safety: SafetyGauges,
+    /// What the stage did.
+    pub stage: StageGauges,
     rss: Mutex<Vec<(f64, u64)>>,
 }
 
@@ -299,6 +302,7 @@ impl Stats {
             key_pose_frames_to_go: AtomicU32::new(0),
             key_pose_index: AtomicU32::new(0),
             safety: SafetyGauges::default(),
+            stage: StageGauges::default(),
             paused: AtomicU32::new(0),
             style: AtomicU32::new(0),
             style_auto: AtomicU32::new(1),
@@ -430,6 +434,7 @@ impl Stats {
             midi_skipped: 0,
             midi_queue_full: 0,
             safety_nets: self.safety.load(),
+            stage: self.stage.load(),
             style: self.style_danced().map(|s| s.name()),
             key_route: self.key_route().map(|r| r.name()),
             view: None,
@@ -481,6 +486,43 @@ impl SafetyGauges {
             accented: v[6],
             key_blended: v[7],
             foot_locked: v[8],
+        })
+    }
+}
+
+/// What the stage did ([`StageCounts`]), published by the motion thread after each step.
+#[derive(Debug, Default)]
+pub struct StageGauges {
+    /// Whether the dancer is on a stage at all.
+    present: AtomicU32,
+    frames: AtomicU64,
+    steered: AtomicU64,
+    glided: AtomicU64,
+    clamped: AtomicU64,
+    /// f32 bits of the largest turn, degrees per second.
+    max_turn: AtomicU32,
+}
+
+impl StageGauges {
+    /// Publishes `c` (a few relaxed stores; no allocation).
+    pub fn store(&self, c: &StageCounts) {
+        self.present.store(1, Ordering::Relaxed);
+        self.frames.store(c.frames, Ordering::Relaxed);
+        self.steered.store(c.steered, Ordering::Relaxed);
+        self.glided.store(c.glided, Ordering::Relaxed);
+        self.clamped.store(c.clamped, Ordering::Relaxed);
+        self.max_turn
+            .store(c.max_turn_deg_per_s.to_bits(), Ordering::Relaxed);
+    }
+
+    /// The counts last published, if the dancer is on a stage.
+    pub fn load(&self) -> Option<StageCounts> {
+        (self.present.load(Ordering::Relaxed) != 0).then(|| StageCounts {
+            frames: self.frames.load(Ordering::Relaxed),
+            steered: self.steered.load(Ordering::Relaxed),
+            glided: self.glided.load(Ordering::Relaxed),
+            clamped: self.clamped.load(Ordering::Relaxed),
+            max_turn_deg_per_s: f32::from_bits(self.max_turn.load(Ordering::Relaxed)),
         })
     }
 }
@@ -606,6 +648,9 @@ pub struct StatsReport {
     /// What the dancer's safety nets did (neural dancer only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety_nets: Option<SafetyCounts>,
+    /// What the stage did: frames steered back from the edge and clamped at it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stage: Option<StageCounts>,
     /// The style danced at the end (sources with a style input only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub style: Option<&'static str>,

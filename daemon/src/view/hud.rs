@@ -29,6 +29,8 @@ pub struct ViewHello {
     /// The controls the dancer honours beyond those every dancer takes; the page hides the
     /// others (the daemon refuses them).
     pub controls: model::source::SourceControls,
+    /// The stage the dancer is kept on (`None`: a dance file, shown wherever it goes).
+    pub stage: Option<model::stage::StageSettings>,
 }
 
 /// The run as the HUD shows it.

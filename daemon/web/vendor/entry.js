@@ -2,7 +2,7 @@
 // Named exports only, so esbuild leaves out the rest of three.js.
 export {
   Scene, PerspectiveCamera, WebGLRenderer, Color, HemisphereLight, DirectionalLight, GridHelper,
-  Vector3, Quaternion,
+  Vector3, Quaternion, Mesh, RingGeometry, MeshBasicMaterial, DoubleSide,
 } from 'three';
 export { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 export { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';

@@ -564,6 +564,7 @@ impl MotionSource for NeuralDancer {
             style: self.has_style_input().then_some(self.style),
             key_route: Some(self.route_now),
             safety: Some(self.counts),
+            stage: None,
         }
     }
 
