@@ -276,6 +276,43 @@ mod tests {
     }
 
     #[test]
+    fn on_a_free_stage_the_dance_is_exactly_the_dancers_own() {
+        let a = offline::analysis::analyze_samples(
+            "demo",
+            &crate::demo_track::demo_track(12.0).samples,
+            crate::demo_track::DEMO_RATE,
+            2,
+            offline::analysis::AnalyzeOptions::native(Some(25.0)),
+        )
+        .unwrap();
+        let music: Vec<_> = a.features.iter().map(|f| f.values).collect();
+        let dance = |source: &mut dyn MotionSource| {
+            crate::offline_dance::dance_stream(source, &music, 0, music.len() - 1, |_| Controls {
+                temperature: 0.5,
+                ..Controls::default()
+            })
+        };
+        let free = SourceSettings {
+            stage: StageSettings {
+                mode: model::stage::StageMode::Free,
+                ..StageSettings::default()
+            },
+            ..SourceSettings::default()
+        };
+        let mut staged = open_source(SourceKind::Neural, &free, 3).unwrap();
+        let mut own = configured_neural_dancer(&free, 3).unwrap();
+        let (placed, made) = (dance(&mut *staged), dance(&mut own));
+        assert_eq!(placed.len(), 299);
+        assert_eq!(placed, made);
+        // On the default stage the same dance is placed otherwise, starting at the centre.
+        let mut bounded = open_source(SourceKind::Neural, &SourceSettings::default(), 3).unwrap();
+        let on_stage = dance(&mut *bounded);
+        assert_ne!(on_stage, made);
+        let start = on_stage[0].root_position;
+        assert!(start.x.abs() < 1e-4 && start.z.abs() < 1e-4, "{start}");
+    }
+
+    #[test]
     fn the_key_route_setting_reaches_the_dancer() {
         let default = towards_a_key(None);
         assert_eq!(default, towards_a_key(Some(KeyPoseRoute::Overlay)));

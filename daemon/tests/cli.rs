@@ -139,23 +139,38 @@ fn generate_dances_to_a_song_and_writes_bvh() {
     };
     let dir = scratch("generate");
     let out = dir.join("gen.bvh");
-    succeed(
+    let (stdout, _) = succeed(
         danced()
             .arg("generate")
             .arg("--audio")
             .arg(data.join("tang2018/DANCE_W_16/audio.mp3"))
             .arg("--out")
             .arg(&out)
-            .args(["--seconds", "10", "--data"])
+            .args([
+                "--seconds",
+                "10",
+                "--stage-radius",
+                "1.0",
+                "--stage-centre",
+                "2,-1",
+            ])
+            .arg("--data")
             .arg(&data),
     );
+    assert!(stdout.contains("stage (bounded, radius 1 m)"), "{stdout}");
     let bvh = model::bvh::Bvh::read(&out).unwrap();
     assert_eq!(bvh.frames.len(), 250);
     assert!(bvh.frames.iter().flatten().all(|v| v.is_finite()));
-    // The dancer moves: the hips' world positions are not all the same.
-    let first = bvh.world_positions(0);
-    let last = bvh.world_positions(249);
-    assert!((first[0] - last[0]).length() > 1.0, "hips did not move");
+    // The dancer moves (the hips travel over a metre) and stays on its 1 m stage.
+    // BVH positions are in centimetres.
+    let hips: Vec<glam::Vec3> = (0..250).map(|f| bvh.world_positions(f)[0] * 0.01).collect();
+    let travelled: f32 = hips.windows(2).map(|w| (w[1] - w[0]).length()).sum();
+    assert!(travelled > 1.0, "hips travelled {travelled} m");
+    let centre = glam::Vec2::new(2.0, -1.0);
+    for (f, h) in hips.iter().enumerate() {
+        let d = (glam::Vec2::new(h.x, h.z) - centre).length();
+        assert!(d <= 1.1, "frame {f}: hips {d:.2} m from the centre");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -408,3 +408,74 @@ fn danced_view_plays_a_dance_file_with_its_song() {
     let _ = child.kill();
     let _ = child.wait();
 }
+
+/// `danced demo --view` on its default stage: the whole mannequin is in the picture at every
+/// look, every 5 s (30 s here; `DANCED_FRAMING_S` sets a longer watch).
+#[test]
+fn the_demo_keeps_the_whole_mannequin_in_the_picture() {
+    if !browser::require_chromium() {
+        return;
+    }
+    let watch_s: u64 = std::env::var("DANCED_FRAMING_S")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(30);
+    let mut child = common::danced()
+        .args(["demo", "--view", "127.0.0.1:0", "--duration"])
+        .arg((watch_s + 30).to_string())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    let url = loop {
+        line.clear();
+        assert!(
+            std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0,
+            "danced demo printed no URL"
+        );
+        if let Some(at) = line.find("http://") {
+            break line[at..].split_whitespace().next().unwrap().to_string();
+        }
+    };
+    let chrome = browser::Browser::launch(800, 600).unwrap();
+    let page = chrome.open(&url).unwrap();
+    let ready = page.wait_for(
+        "window.danced && window.danced.ready && window.danced.framesApplied > 10",
+        Duration::from_secs(30),
+    );
+    assert!(ready.is_ok(), "{ready:?}\nconsole: {:?}", page.console());
+    let stage = page.eval("window.danced.stage").unwrap();
+    assert_eq!(stage["mode"], "bounded", "{stage}");
+    let dir = target_dir();
+    let start = Instant::now();
+    let mut looks = 0;
+    while looks * 5 <= watch_s {
+        let at = Duration::from_secs(looks * 5);
+        // Poll to the moment of the look (the page renders on its own meanwhile).
+        testkit::wait_until(
+            at.saturating_sub(start.elapsed()) + Duration::from_millis(10),
+            || start.elapsed() >= at,
+        );
+        let framing = page.eval("window.danced.framing()").unwrap();
+        let png = page.screenshot_png().unwrap();
+        let shot = dir.join(format!("view-framing-{:02}s.png", looks * 5));
+        std::fs::write(&shot, &png).unwrap();
+        assert_eq!(
+            framing["inside"],
+            serde_json::Value::Bool(true),
+            "at {} s the mannequin leaves the picture: {framing} ({})",
+            looks * 5,
+            shot.display()
+        );
+        looks += 1;
+    }
+    eprintln!(
+        "{looks} looks, the last: {}",
+        dir.join(format!("view-framing-{:02}s.png", (looks - 1) * 5))
+            .display()
+    );
+    child.kill().ok();
+    child.wait().ok();
+}

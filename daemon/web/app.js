@@ -191,6 +191,27 @@ state.boneWorldPositions = (names) => {
   return out;
 };
 
+/** Where the avatar's bones fall in the picture: the extremes of their normalized device
+ * coordinates (−1..1 is on screen), with a margin above the head bone for the skull. */
+state.framing = () => {
+  if (!vrm) return null;
+  vrm.scene.updateMatrixWorld(true);
+  camera.updateMatrixWorld(true);
+  const v = new Vector3();
+  let [x0, x1, y0, y1] = [Infinity, -Infinity, Infinity, -Infinity];
+  for (const name of Object.keys(vrm.humanoid.humanBones)) {
+    const node = vrm.humanoid.getRawBoneNode(name);
+    if (!node) continue;
+    for (const lift of name === 'head' ? [0, 0.2] : [0]) {
+      node.getWorldPosition(v);
+      v.y += lift;
+      v.project(camera);
+      x0 = Math.min(x0, v.x); x1 = Math.max(x1, v.x); y0 = Math.min(y0, v.y); y1 = Math.max(y1, v.y);
+    }
+  }
+  return { x0, x1, y0, y1, inside: x0 > -1 && x1 < 1 && y0 > -1 && y1 < 1 };
+};
+
 // ---- HUD ----
 const $ = (id) => document.getElementById(id);
 function showBeat(index, perBar, bpm, barConfidence) {
@@ -268,11 +289,23 @@ function showStage(stage) {
   // Our x and z are the page's (the hips' position is turned back from Unity's the same way).
   stageRing.position.set(stage.centre[0], 0.005, stage.centre[1]);
   scene.add(stageRing);
-  // Frame the whole stage: the camera on the audience's side, far enough for its width.
+  frameStage();
+}
+
+/** Puts the camera on the audience's side of the stage, far enough that a dancer anywhere on
+ * it, arms out, is in the picture at the page's aspect (the near edge is the tightest). */
+function frameStage() {
+  const stage = state.stage;
+  if (!stage) return;
+  const r = Math.max(stage.radius_m, 0.3);
+  const half = Math.tan((camera.fov / 2) * Math.PI / 180);
+  const reach = r + 0.9;
+  const distance = Math.max(5.6, reach / (half * Math.max(camera.aspect, 0.1)) + r, 1.2 / half + r);
   const dir = stage.facing_deg * Math.PI / 180;
-  const distance = 5.6 * Math.max(1, (r + 0.4) / 1.9);
-  orbit.target.set(stage.centre[0], 0.95, stage.centre[1]);
-  camera.position.set(stage.centre[0] + Math.sin(dir) * distance, 1.5,
+  // Aimed below the hips and from above them: the dancer sits in the upper part of the
+  // picture, clear of the controls, and the stage's edge shows as an ellipse round it.
+  orbit.target.set(stage.centre[0], 0.45, stage.centre[1]);
+  camera.position.set(stage.centre[0] + Math.sin(dir) * distance, 2.2,
     stage.centre[1] + Math.cos(dir) * distance);
 }
 
@@ -412,6 +445,7 @@ function resize() {
     renderer.setSize(w, h, false);
     camera.aspect = w / Math.max(h, 1);
     camera.updateProjectionMatrix();
+    frameStage();
   }
 }
 function render(now) {

@@ -48,6 +48,9 @@ const W_VELOCITY: f32 = 2.0;
 /// Weight of a clip's travel against the stage's preferred direction, per metre the clip
 /// travels the other way at full strength (the edge of the stage). A beat's clip travels up
 /// to about 0.3 m, so at the edge an outward step costs about what a tempo off by 50 % does.
+/// On five rendered songs (5 min each, bounded 1.5 m) the clamp acted on 0.00–0.47 % of
+/// frames at 6 against 0.28–2.12 % at 0; at 12 the choices went to clips that jump (foot
+/// skating 0.25–1.25 m/s against 0.12–0.16).
 const W_STAGE: f32 = 6.0;
 /// Duration of the offset decay at a clip switch, seconds.
 const BLEND_SECONDS: f32 = 0.25;

@@ -34,6 +34,7 @@ use crate::source::{Controls, MotionSource, SourceControls, SourceReport, Travel
 
 /// How the dance is kept on the stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum StageMode {
     /// Within [`StageSettings::radius_m`] of the centre: the travel turns back before the edge.
     #[default]

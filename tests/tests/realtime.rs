@@ -131,6 +131,8 @@ fn live_run(source: &'static str) -> JoinHandle<LiveRun> {
         config.control.osc_port = free_port();
         config.audio.duration = Some(RUN_S);
         config.dancer.source = source.into();
+        // The smallest stage, so its steering, glide and clamp all run on the motion thread.
+        config.stage.radius_m = model::stage::MIN_RADIUS_M;
         // The browser view too: the sender hands it every frame and event.
         config.view.enabled = true;
         config.view.addr = "127.0.0.1:0".into();
@@ -227,6 +229,10 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
             ("retrieval", None) => {}
             (s, c) => panic!("{s}: safety nets {c:?}"),
         }
+        // The stage placed every frame, and had to work at it.
+        let stage = r.stage.expect("the stage reports");
+        assert!(stage.frames as f64 > 20.0 * (r.wall_s - 1.0), "{stage:?}");
+        assert!(stage.steered > 0 && stage.glided > 0, "{stage:?}");
         // The view took the frames (no browser connected: taken from the slot, not sent).
         let view = r.view.expect("the view ran");
         assert_eq!(view.events_dropped, 0, "{view:?}");
