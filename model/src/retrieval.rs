@@ -472,7 +472,9 @@ impl RetrievalDancer {
         if let Some(preferred) = preferred {
             let travel = lib.poses[clip.start + clip.len].root_position
                 - lib.poses[clip.start].root_position;
-            c -= W_STAGE * travel.with_y(0.0).dot(preferred);
+            // Outward travel pays; inward travel earns nothing, or the clips that travel most
+            // (a capture's glitches among them) would win near the edge.
+            c += W_STAGE * (-travel.with_y(0.0).dot(preferred)).max(0.0);
         }
         c
     }
