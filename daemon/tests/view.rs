@@ -278,6 +278,29 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
 
 /// Polls the page until its bones are within [`TOLERANCE_M`] of `want` (5 s at most), prints
 /// the conformance table and asserts; returns the largest error, metres.
+/// The view's URL as `what` (a spawned danced with its stderr piped) prints it, and that
+/// stderr, to keep open while the child runs (closed, its next line would kill it).
+fn printed_url(
+    child: &mut std::process::Child,
+    what: &str,
+) -> (String, std::io::BufReader<std::process::ChildStderr>) {
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    loop {
+        line.clear();
+        assert!(
+            std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0,
+            "{what} printed no URL"
+        );
+        if let Some(at) = line.find("http://") {
+            return (
+                line[at..].split_whitespace().next().unwrap().to_string(),
+                stderr,
+            );
+        }
+    }
+}
+
 fn wait_for_pose(page: &browser::Page, pose: &str, want: &[Vec3; JOINT_COUNT]) -> f32 {
     let names: Vec<String> = BONES.iter().map(|j| j.name().to_string()).collect();
     let names_js = serde_json::to_string(&names).unwrap();
@@ -360,18 +383,7 @@ fn danced_view_plays_a_dance_file_with_its_song() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
-    let mut line = String::new();
-    let url = loop {
-        line.clear();
-        assert!(
-            std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0,
-            "danced view printed no URL"
-        );
-        if let Some(at) = line.find("http://") {
-            break line[at..].split_whitespace().next().unwrap().to_string();
-        }
-    };
+    let (url, _stderr) = printed_url(&mut child, "danced view");
     let chrome = browser::Browser::launch(640, 480).unwrap();
     let page = chrome.open(&url).unwrap();
     let playing = page.wait_for(
@@ -427,18 +439,7 @@ fn the_demo_keeps_the_whole_mannequin_in_the_picture() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
-    let mut line = String::new();
-    let url = loop {
-        line.clear();
-        assert!(
-            std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0,
-            "danced demo printed no URL"
-        );
-        if let Some(at) = line.find("http://") {
-            break line[at..].split_whitespace().next().unwrap().to_string();
-        }
-    };
+    let (url, _stderr) = printed_url(&mut child, "danced demo");
     let chrome = browser::Browser::launch(800, 600).unwrap();
     let page = chrome.open(&url).unwrap();
     let ready = page.wait_for(

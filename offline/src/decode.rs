@@ -313,6 +313,13 @@ impl AudioFileReader {
     }
 }
 
+/// Whether `path` names a song by its extension (flac, wav, mp3 or ogg): what a folder of
+/// songs is read for.
+pub fn is_audio_file(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| ["flac", "wav", "mp3", "ogg"].iter().any(|x| e == *x))
+}
+
 /// Decodes the default audio track of a file completely into memory.
 pub fn decode_file(path: &Path) -> Result<DecodedAudio, OfflineError> {
     let mut reader = AudioFileReader::open(path)?;

@@ -88,7 +88,7 @@ pub fn annotated_songs(folder: &Path) -> Result<Vec<PathBuf>> {
     let mut found = Vec::new();
     for entry in dir {
         let p = entry?.path();
-        if is_audio(&p)
+        if offline::decode::is_audio_file(&p)
             && p.with_extension("beats").exists()
             && !offline::real_music::is_held_out(&p)
         {
@@ -122,9 +122,4 @@ pub fn analyse(hearing: &SongHearing, options: AnalyzeOptions) -> Result<FileAna
         }
     };
     analysis.with_context(|| format!("analysing {}", audio.display()))
-}
-
-fn is_audio(p: &Path) -> bool {
-    p.extension()
-        .is_some_and(|e| ["flac", "wav", "mp3", "ogg"].iter().any(|x| e == *x))
 }

@@ -42,18 +42,13 @@ pub struct BenchStageArgs {
 
 /// The audio files `paths` name (folders: their audio files, sorted).
 fn song_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let audio = |p: &std::path::Path| {
-        p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-            ["flac", "wav", "mp3", "ogg"].contains(&e.to_ascii_lowercase().as_str())
-        })
-    };
     let mut files = Vec::new();
     for p in paths {
         if p.is_dir() {
             let mut inside: Vec<PathBuf> = std::fs::read_dir(p)
                 .with_context(|| format!("reading {}", p.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| audio(f))
+                .filter(|f| offline::decode::is_audio_file(f))
                 .collect();
             inside.sort();
             files.extend(inside);
@@ -78,7 +73,6 @@ fn dance(
         ..SourceSettings::default()
     };
     let mut dancer = open_source(kind, &settings, args.seed)?;
-    dancer.reset(args.seed);
     let look = dancer.lookahead_frames();
     let frames = frames.min(music.len().saturating_sub(look));
     let poses = crate::offline_dance::dance_stream(&mut *dancer, music, 0, frames, |_| Controls {
