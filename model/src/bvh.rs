@@ -21,7 +21,9 @@
 //! The hierarchy is parsed without recursion, so deep nesting cannot overflow the stack, and
 //! [`Bvh::read`] refuses files over [`MAX_FILE_BYTES`].
 
+mod axes;
 mod export;
+mod names;
 mod retarget;
 #[cfg(test)]
 mod tests;
@@ -34,8 +36,10 @@ use glam::{DQuat, DVec3, Quat, Vec3};
 
 use crate::ModelError;
 
+pub use axes::{AxisHints, DetectedAxes, describe_axes, detect_axes};
 pub use export::{export, export_to_string};
-pub use retarget::{RetargetOptions, Retargeted, joint_for_name, retarget};
+pub use names::joint_for_name;
+pub use retarget::{REQUIRED_JOINTS, RetargetOptions, Retargeted, import, retarget};
 
 /// Largest file [`Bvh::read`] accepts, bytes (a 1 GiB BVH is ~100 M values, hours of motion).
 pub const MAX_FILE_BYTES: u64 = 1 << 30;

@@ -95,6 +95,19 @@ pub enum ModelError {
     /// on our rig.
     #[error("{0}")]
     BvhInvalid(String),
+    /// A BVH whose joint names leave a body part without a joint to drive it.
+    #[error(
+        "no joint of the file drives {missing} (the file's joints it could not place: {unused}); \
+         name them in a joint map, a TOML file given with --joint-map:\n\n[joints]\n{example}"
+    )]
+    BvhUnmapped {
+        /// Our joints nothing drives, comma-separated.
+        missing: String,
+        /// The file's joints that drive nothing, comma-separated.
+        unused: String,
+        /// Lines of a map for the missing joints, `"source name" = "OurJoint"`.
+        example: String,
+    },
 
     // ---- The clip library file ([`crate::clip_file`]) ----
     /// Not a clip library (wrong magic).
@@ -224,6 +237,10 @@ pub enum ModelError {
         /// Size of the offending one.
         found: usize,
     },
+    /// A motion shows no beat: no periodic stops between the slowest and fastest tempo looked
+    /// for.
+    #[error("the motion shows no beat between 55 and 190 BPM")]
+    NoPulse,
     /// Too little data for the statistic (e.g. one sample has no covariance).
     #[error("need at least {needed} {what}, got {found}")]
     TooShort {

@@ -16,6 +16,7 @@ pub mod key_overlay;
 pub mod leg_ik;
 pub mod metrics;
 pub mod motion;
+pub mod motion_beat;
 pub mod neural;
 pub mod phase_follower;
 pub mod retrieval;

@@ -106,7 +106,7 @@ impl<'a> JointTrack<'a> {
     }
 
     /// One joint position in double precision.
-    fn pos(&self, frame: usize, joint: usize) -> DVec3 {
+    pub fn pos(&self, frame: usize, joint: usize) -> DVec3 {
         self.positions[frame * self.joints + joint].as_dvec3()
     }
 

@@ -47,17 +47,25 @@
 //! nor slide (Unity's humanoid animation scales root motion by its hip-height "human scale"
 //! the same way).
 //!
-//! # Axes
+//! # Axes and floor
 //!
-//! Bandai Namco Research's data is Y up, right-handed, in centimetres, with the character's left
-//! at +X when it faces +Z, like ours (its walks go forward along +Z with the toes pointing +Z
-//! and the left hand at +X), so [`RetargetOptions::default`]'s identity `axes` fits it;
-//! its zero pose is not a T-pose (every bone lies along its joint's local X), which the rest
-//! alignment handles. For a Z-up file use [`RetargetOptions::z_up`].
+//! Unless given ([`RetargetOptions::axes`]), the file's up axis and handedness are found from the
+//! motion ([`super::detect_axes`]): Bandai Namco's Y-up files, Blender's Z-up ones and AMASS's
+//! (a Y-up skeleton stood up in a Z-up world by its root's rotation) all come out standing and
+//! facing +Z. The zero pose is turned upright before it is compared with our T-pose, so a T-pose
+//! skeleton lying in its file is still read as a T-pose. With [`RetargetOptions::floor`] the
+//! motion is then moved up or down so its feet are on the floor ([`Retargeted::floor_shift_m`]).
+//!
+//! # Names
+//!
+//! Which source joint drives which of ours: the user's map, the tables of the common naming
+//! conventions, the names' parts and the hierarchy, in that order (see `names.rs`).
 
 use glam::{Mat3, Quat, Vec3};
 
 use super::Bvh;
+use super::axes::{detect_axes, upright};
+use super::names::match_joints;
 use crate::ModelError;
 use crate::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use crate::rotation::{normalize_or_identity, rotation_between, twist_angle};
@@ -66,9 +74,12 @@ use crate::rotation::{normalize_or_identity, rotation_between, twist_angle};
 #[derive(Clone, Debug, PartialEq)]
 pub struct RetargetOptions {
     /// Maps the file's world coordinates to ours (+Y up, character's left +X when facing +Z);
-    /// must be orthogonal (a reflection is allowed, for left-handed files).
-    pub axes: Mat3,
-    /// Extra source joint names and the joints they drive, tried before the built-in table
+    /// must be orthogonal (a reflection is allowed, for left-handed files). `None` finds it
+    /// from the motion ([`super::detect_axes`]).
+    pub axes: Option<Mat3>,
+    /// What the user said of the axes when `axes` is `None`; the rest is found.
+    pub hints: super::AxisHints,
+    /// Extra source joint names and the joints they drive, tried before the built-in tables
     /// (ASCII case-insensitive, namespace prefixes such as `mixamorig:` ignored).
     pub names: Vec<(String, Joint)>,
     /// Metres per file unit; `None` guesses it from the leg length.
@@ -76,15 +87,21 @@ pub struct RetargetOptions {
     /// Scale the root's translation by our leg length over the source's (true), or only convert
     /// it to metres and shift it up or down by the difference in leg length (false).
     pub scale_root_to_legs: bool,
+    /// Shift the motion up or down so its lowest point, in the frames where it is lowest (the
+    /// tenth percentile of each frame's lowest joint), is as high above the floor as our rest
+    /// pose's lowest joint: feet on the floor whatever height the file's origin is at.
+    pub floor: bool,
 }
 
 impl Default for RetargetOptions {
     fn default() -> Self {
         RetargetOptions {
-            axes: Mat3::IDENTITY,
+            axes: None,
+            hints: super::AxisHints::default(),
             names: Vec::new(),
             metres_per_unit: None,
             scale_root_to_legs: true,
+            floor: true,
         }
     }
 }
@@ -94,7 +111,7 @@ impl RetargetOptions {
     pub fn z_up() -> Self {
         // (x, y, z) → (x, z, −y): up becomes +Y and Blender's forward (−Y) becomes +Z.
         RetargetOptions {
-            axes: Mat3::from_cols(Vec3::X, -Vec3::Z, Vec3::Y),
+            axes: Some(Mat3::from_cols(Vec3::X, -Vec3::Z, Vec3::Y)),
             ..Self::default()
         }
     }
@@ -117,58 +134,23 @@ pub struct Retargeted {
     /// Whether bone twists were estimated from the motion (the file's zero pose is not a
     /// T-pose) rather than taken from the zero pose.
     pub twists_from_motion: bool,
-}
-
-/// Built-in names (lower case, namespace removed): Bandai Namco Research and Mixamo.
-const NAME_TABLE: &[(&str, Joint)] = &[
-    // Bandai Namco Research motion datasets.
-    ("shoulder_l", Joint::LeftShoulder),
-    ("upperarm_l", Joint::LeftUpperArm),
-    ("lowerarm_l", Joint::LeftLowerArm),
-    ("hand_l", Joint::LeftHand),
-    ("upperleg_l", Joint::LeftUpperLeg),
-    ("lowerleg_l", Joint::LeftLowerLeg),
-    ("foot_l", Joint::LeftFoot),
-    ("toes_l", Joint::LeftToes),
-    ("shoulder_r", Joint::RightShoulder),
-    ("upperarm_r", Joint::RightUpperArm),
-    ("lowerarm_r", Joint::RightLowerArm),
-    ("hand_r", Joint::RightHand),
-    ("upperleg_r", Joint::RightUpperLeg),
-    ("lowerleg_r", Joint::RightLowerLeg),
-    ("foot_r", Joint::RightFoot),
-    ("toes_r", Joint::RightToes),
-    // Mixamo (after removing "mixamorig:").
-    ("spine1", Joint::Chest),
-    ("spine2", Joint::UpperChest),
-    ("leftarm", Joint::LeftUpperArm),
-    ("leftforearm", Joint::LeftLowerArm),
-    ("leftupleg", Joint::LeftUpperLeg),
-    ("leftleg", Joint::LeftLowerLeg),
-    ("lefttoebase", Joint::LeftToes),
-    ("rightarm", Joint::RightUpperArm),
-    ("rightforearm", Joint::RightLowerArm),
-    ("rightupleg", Joint::RightUpperLeg),
-    ("rightleg", Joint::RightLowerLeg),
-    ("righttoebase", Joint::RightToes),
-];
-
-/// `name` without a namespace prefix (`mixamorig:Hips` → `Hips`) and surrounding space.
-fn strip_namespace(name: &str) -> &str {
-    let name = name.trim();
-    name.rsplit_once(':').map_or(name, |(_, n)| n)
-}
-
-/// The joint of our rig a source joint name drives, from our own (`HumanBodyBones`) names and
-/// the Bandai Namco and Mixamo names (ASCII case-insensitive); `None` if unknown.
-pub fn joint_for_name(name: &str) -> Option<Joint> {
-    let name = strip_namespace(name);
-    Joint::from_name(name).or_else(|| {
-        NAME_TABLE
-            .iter()
-            .find(|(n, _)| n.eq_ignore_ascii_case(name))
-            .map(|&(_, j)| j)
-    })
+    /// The map from file axes to ours that was used.
+    pub axes: Mat3,
+    /// Whether `axes` was found from the motion (not given).
+    pub axes_detected: bool,
+    /// The naming convention that matched most joint names.
+    pub convention: &'static str,
+    /// Names of the source joints that drive none of ours (end bones, fingers, helpers).
+    pub unmapped: Vec<String>,
+    /// Metres the floor fit moved the motion up (negative: down); 0 without it.
+    pub floor_shift_m: f32,
+    /// Mean angle, degrees, between each of our limb and spine bones (a mapped joint to the
+    /// next mapped joint down its chain) and the source's bone between the same joints, over
+    /// the frames.
+    pub bone_error_deg: f32,
+    /// The same for the girdles' fixed offsets (hips to hip joints, chest to clavicles): how
+    /// differently the two rigs are shaped there, constant over the motion.
+    pub girdle_error_deg: f32,
 }
 
 /// Whether `ancestor` is `joint` or above it in our hierarchy.
@@ -205,33 +187,15 @@ pub fn retarget(
     options: &RetargetOptions,
 ) -> Result<Retargeted, ModelError> {
     bvh.validate()?;
-    let axes = options.axes;
-    let orthogonal = (axes * axes.transpose()).abs_diff_eq(Mat3::IDENTITY, 1e-4)
-        && (axes.determinant().abs() - 1.0).abs() < 1e-4;
-    if !orthogonal {
-        return Err(ModelError::BvhInvalid(format!(
-            "axes {axes} are not an orthogonal map"
-        )));
-    }
-    let identity_axes = axes == Mat3::IDENTITY;
     let n = bvh.joints.len();
 
-    // Which of our joints each source joint drives; the first source joint for a name wins.
-    let mut driven: Vec<Option<Joint>> = vec![None; n];
+    // Which of our joints each source joint drives.
+    let names = match_joints(bvh, &options.names);
+    let driven = names.driven;
     let mut source_joints: [Option<usize>; JOINT_COUNT] = [None; JOINT_COUNT];
-    for (i, joint) in bvh.joints.iter().enumerate() {
-        let name = strip_namespace(&joint.name);
-        let ours = options
-            .names
-            .iter()
-            .find(|(n, _)| strip_namespace(n).eq_ignore_ascii_case(name))
-            .map(|&(_, j)| j)
-            .or_else(|| joint_for_name(name));
-        if let Some(j) = ours
-            && source_joints[j.index()].is_none()
-        {
+    for (i, d) in driven.iter().enumerate() {
+        if let Some(j) = d {
             source_joints[j.index()] = Some(i);
-            driven[i] = Some(j);
         }
     }
     if source_joints[Joint::Hips.index()].is_none() {
@@ -241,6 +205,22 @@ pub fn retarget(
             names.join(", ")
         )));
     }
+
+    let (axes, axes_detected) = match options.axes {
+        Some(axes) => (axes, false),
+        None => match detect_axes(bvh, &source_joints, &options.hints) {
+            Some(found) => (found.axes, true),
+            None => (Mat3::IDENTITY, false),
+        },
+    };
+    let orthogonal = (axes * axes.transpose()).abs_diff_eq(Mat3::IDENTITY, 1e-4)
+        && (axes.determinant().abs() - 1.0).abs() < 1e-4;
+    if !orthogonal {
+        return Err(ModelError::BvhInvalid(format!(
+            "axes {axes} are not an orthogonal map"
+        )));
+    }
+    let identity_axes = axes == Mat3::IDENTITY;
 
     // Nearest mapped ancestor of each source joint (not itself).
     let mut mapped_ancestor: Vec<Option<usize>> = vec![None; n];
@@ -268,13 +248,22 @@ pub fn retarget(
         }
     }
 
-    // Rest geometry: the source's zero pose in our axes, our T-pose.
+    // Rest geometry: the source's zero pose in our axes, turned upright, and our T-pose.
     let zero: Vec<Vec3> = bvh.rest_positions().iter().map(|&p| axes * p).collect();
+    let turn_upright = upright(&zero, &source_joints);
+    let zero: Vec<Vec3> = zero.iter().map(|&p| turn_upright * p).collect();
     let mut ours_rest = [Vec3::ZERO; JOINT_COUNT];
     skeleton.world_positions(&skeleton.rest_pose(), &mut ours_rest);
 
-    let (alignment, twists_from_motion) =
-        rest_alignment(bvh, &axes, &driven, &mapped_ancestor, &zero, &ours_rest);
+    let (alignment, twists_from_motion) = rest_alignment(
+        bvh,
+        &axes,
+        turn_upright,
+        &driven,
+        &mapped_ancestor,
+        &zero,
+        &ours_rest,
+    );
 
     // Source T-pose positions (our axes, file units): each joint turned by the alignment of
     // itself or its nearest mapped ancestor.
@@ -285,11 +274,11 @@ pub fn retarget(
             Some(p) => {
                 let turn = match driven[p] {
                     Some(_) => alignment[p],
-                    None => mapped_ancestor[p].map_or(Quat::IDENTITY, |a| alignment[a]),
+                    None => mapped_ancestor[p].map_or(turn_upright, |a| alignment[a]),
                 };
                 t_pose[p] + turn * (axes * joint.offset)
             }
-            None => axes * joint.offset,
+            None => turn_upright * (axes * joint.offset),
         };
     }
     let (source_size, our_size) = body_size(&source_joints, &t_pose, &ours_rest);
@@ -353,6 +342,21 @@ pub fn retarget(
         poses.push(pose);
     }
 
+    let floor_shift_m = if options.floor {
+        fit_floor(skeleton, &mut poses, &ours_rest)
+    } else {
+        0.0
+    };
+    let (bone_error_deg, girdle_error_deg) =
+        bone_error_deg(bvh, skeleton, &axes, &source_joints, &poses);
+    let unmapped = bvh
+        .joints
+        .iter()
+        .zip(&driven)
+        .filter(|(_, d)| d.is_none())
+        .map(|(j, _)| j.name.clone())
+        .collect();
+
     Ok(Retargeted {
         poses,
         fps: bvh.fps(),
@@ -360,7 +364,113 @@ pub fn retarget(
         metres_per_unit,
         root_scale,
         twists_from_motion,
+        axes,
+        axes_detected,
+        convention: names.convention,
+        unmapped,
+        floor_shift_m,
+        bone_error_deg,
+        girdle_error_deg,
     })
+}
+
+/// Most frames read for the floor fit and the bone-direction error.
+const CHECK_FRAMES: usize = 600;
+
+/// Frames `0..n` thinned to at most [`CHECK_FRAMES`], evenly.
+fn checked_frames(n: usize) -> impl Iterator<Item = usize> {
+    let count = n.min(CHECK_FRAMES);
+    (0..count).map(move |k| k * n / count)
+}
+
+/// Moves `poses` up or down so the tenth percentile of each frame's lowest joint is at the
+/// height of our rest pose's lowest joint; returns the shift, metres.
+fn fit_floor(skeleton: &Skeleton, poses: &mut [Pose], ours_rest: &[Vec3; JOINT_COUNT]) -> f32 {
+    if poses.is_empty() {
+        return 0.0;
+    }
+    let rest_low = ours_rest.iter().map(|p| p.y).fold(f32::MAX, f32::min);
+    let mut world = [Vec3::ZERO; JOINT_COUNT];
+    let mut lows: Vec<f32> = checked_frames(poses.len())
+        .map(|f| {
+            skeleton.world_positions(&poses[f], &mut world);
+            world.iter().map(|p| p.y).fold(f32::MAX, f32::min)
+        })
+        .collect();
+    lows.sort_by(f32::total_cmp);
+    let shift = rest_low - lows[lows.len() / 10];
+    if !shift.is_finite() {
+        return 0.0;
+    }
+    for pose in poses.iter_mut() {
+        pose.root_position.y += shift;
+    }
+    shift
+}
+
+/// Mean angles, degrees, between our bones and the source's between the same joints: the
+/// limbs' and spine's, and the girdles'; see [`Retargeted::bone_error_deg`] and
+/// [`Retargeted::girdle_error_deg`].
+fn bone_error_deg(
+    bvh: &Bvh,
+    skeleton: &Skeleton,
+    axes: &Mat3,
+    source_joints: &[Option<usize>; JOINT_COUNT],
+    poses: &[Pose],
+) -> (f32, f32) {
+    // Each mapped joint and its nearest mapped ancestor in our hierarchy.
+    let bones: Vec<(usize, usize)> = Joint::ALL
+        .into_iter()
+        .filter(|j| source_joints[j.index()].is_some())
+        .filter_map(|j| {
+            let mut p = j.parent()?;
+            loop {
+                if source_joints[p.index()].is_some() {
+                    return Some((p.index(), j.index()));
+                }
+                p = p.parent()?;
+            }
+        })
+        .collect();
+    let (mut rotations, mut positions) = (Vec::new(), Vec::new());
+    let mut ours = [Vec3::ZERO; JOINT_COUNT];
+    // A bone from a joint with several mapped branches to one that is not its main chain (the
+    // hips to a hip joint, the chest to a clavicle) is a fixed offset within one rigid segment:
+    // its angle is the two rigs' shape, the same in every frame.
+    let girdle = |a: usize, b: usize| {
+        let main = bones
+            .iter()
+            .filter(|&&(p, _)| p == a)
+            .map(|&(_, c)| c)
+            .min();
+        bones.iter().filter(|&&(p, _)| p == a).count() > 1 && main != Some(b)
+    };
+    let (mut sum, mut count) = ([0.0f64; 2], [0usize; 2]);
+    for f in checked_frames(poses.len().min(bvh.frames.len())) {
+        bvh.world_transforms(f, &mut rotations, &mut positions);
+        skeleton.world_positions(&poses[f], &mut ours);
+        for &(a, b) in &bones {
+            let (Some(sa), Some(sb)) = (source_joints[a], source_joints[b]) else {
+                continue;
+            };
+            let theirs = (*axes * (positions[sb] - positions[sa])).try_normalize();
+            let mine = (ours[b] - ours[a]).try_normalize();
+            if let (Some(t), Some(m)) = (theirs, mine) {
+                let e = f64::from(t.dot(m).clamp(-1.0, 1.0).acos().to_degrees());
+                let k = usize::from(girdle(a, b));
+                sum[k] += e;
+                count[k] += 1;
+            }
+        }
+    }
+    let mean = |k: usize| {
+        if count[k] == 0 {
+            0.0
+        } else {
+            (sum[k] / count[k] as f64) as f32
+        }
+    };
+    (mean(0), mean(1))
 }
 
 /// Hips-to-ankle drop of the source's T-pose (file units) and ours (metres), or, without
@@ -420,6 +530,7 @@ const QUARTER_TURN_TOLERANCE_RAD: f32 = 5.0 * std::f32::consts::PI / 180.0;
 fn rest_alignment(
     bvh: &Bvh,
     axes: &Mat3,
+    turn_upright: Quat,
     driven: &[Option<Joint>],
     mapped_ancestor: &[Option<usize>],
     zero: &[Vec3],
@@ -491,6 +602,7 @@ fn rest_alignment(
     // A file whose zero pose is not a T-pose bakes its rest orientations into the channels,
     // and its zero-pose joint frames say nothing about twist; the motion does.
     let from_motion = !zero_is_t_pose && !bvh.frames.is_empty();
+    let upright_inverse = turn_upright.conjugate();
     let samples: Vec<Vec<Quat>> = if from_motion {
         let identity_axes = *axes == Mat3::IDENTITY;
         let count = bvh.frames.len().min(TWIST_SAMPLE_FRAMES);
@@ -498,9 +610,10 @@ fn rest_alignment(
         (0..count)
             .map(|k| {
                 bvh.world_transforms(k * bvh.frames.len() / count, &mut rotations, &mut positions);
+                // The world rotations of a source whose zero pose is the upright one.
                 rotations
                     .iter()
-                    .map(|&q| convert_rotation(axes, identity_axes, q))
+                    .map(|&q| convert_rotation(axes, identity_axes, q) * upright_inverse)
                     .collect()
             })
             .collect()
@@ -537,6 +650,12 @@ fn rest_alignment(
             _ => 0.0,
         };
         alignment[i] = normalize_or_identity(Quat::from_axis_angle(axis, twist) * base);
+    }
+    // Found for the upright zero pose; the file's own zero pose is turned upright first.
+    for (i, a) in alignment.iter_mut().enumerate() {
+        if driven[i].is_some() {
+            *a = normalize_or_identity(*a * turn_upright);
+        }
     }
     (alignment, from_motion)
 }
@@ -585,4 +704,71 @@ fn ours_rest_offset_direction(joint: Joint, ours_rest: &[Vec3; JOINT_COUNT]) -> 
         .parent()
         .and_then(|p| (ours_rest[joint.index()] - ours_rest[p.index()]).try_normalize())
         .unwrap_or(Vec3::Y)
+}
+
+/// Our joints every imported dance must drive: without them there is no body to dance.
+pub const REQUIRED_JOINTS: [Joint; 9] = [
+    Joint::Hips,
+    Joint::LeftUpperLeg,
+    Joint::LeftLowerLeg,
+    Joint::RightUpperLeg,
+    Joint::RightLowerLeg,
+    Joint::LeftUpperArm,
+    Joint::LeftLowerArm,
+    Joint::RightUpperArm,
+    Joint::RightLowerArm,
+];
+
+/// A dance file put on our rig, as every command that reads one does: [`retarget`], then a
+/// [`ModelError::BvhUnmapped`] naming the body parts nothing drives (of [`REQUIRED_JOINTS`], and
+/// a head, neck or chest) and how to map them.
+pub fn import(
+    bvh: &Bvh,
+    skeleton: &Skeleton,
+    options: &RetargetOptions,
+) -> Result<Retargeted, ModelError> {
+    let names = match_joints(bvh, &options.names);
+    let driven = |j: Joint| names.driven.contains(&Some(j));
+    let mut missing: Vec<Joint> = REQUIRED_JOINTS
+        .into_iter()
+        .filter(|&j| !driven(j))
+        .collect();
+    if ![Joint::Head, Joint::Neck, Joint::UpperChest, Joint::Chest]
+        .into_iter()
+        .any(driven)
+    {
+        missing.push(Joint::Head);
+    }
+    if !missing.is_empty() {
+        let unused: Vec<&str> = bvh
+            .joints
+            .iter()
+            .zip(&names.driven)
+            .filter(|(_, d)| d.is_none())
+            .map(|(j, _)| j.name.as_str())
+            .collect();
+        let example = missing
+            .iter()
+            .enumerate()
+            .map(|(k, j)| {
+                let source = unused.get(k).copied().unwrap_or("their name");
+                format!("\"{source}\" = \"{j}\"")
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        return Err(ModelError::BvhUnmapped {
+            missing: missing
+                .iter()
+                .map(|j| j.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            unused: if unused.is_empty() {
+                "none".to_owned()
+            } else {
+                unused.join(", ")
+            },
+            example,
+        });
+    }
+    retarget(bvh, skeleton, options)
 }

@@ -393,6 +393,15 @@ fn pose(max: f32) -> impl Strategy<Value = Pose> {
         })
 }
 
+/// Options that put a file's motion on our rig exactly as given: its axes as ours, no floor fit.
+fn exact() -> RetargetOptions {
+    RetargetOptions {
+        axes: Some(Mat3::IDENTITY),
+        floor: false,
+        ..RetargetOptions::default()
+    }
+}
+
 /// Export → write → read → retarget onto the same skeleton.
 fn round_trip(skeleton: &Skeleton, poses: &[Pose], fps: f64) -> Retargeted {
     let dir = temp_dir("roundtrip");
@@ -400,7 +409,7 @@ fn round_trip(skeleton: &Skeleton, poses: &[Pose], fps: f64) -> Retargeted {
     export(skeleton, poses, fps).write(&path).unwrap();
     let bvh = Bvh::read(&path).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
-    retarget(&bvh, skeleton, &RetargetOptions::default()).unwrap()
+    retarget(&bvh, skeleton, &exact()).unwrap()
 }
 
 fn assert_same_motion(skeleton: &Skeleton, expected: &[Pose], got: &[Pose], tolerance: f32) {
@@ -723,11 +732,11 @@ proptest! {
         let rig = SourceRig {
             names: MIXAMO_NAMES,
             orient,
-            axes: if z_up { RetargetOptions::z_up().axes } else { Mat3::IDENTITY },
+            axes: if z_up { RetargetOptions::z_up().axes.unwrap() } else { Mat3::IDENTITY },
             units_per_metre: if metres { 1.0 } else { 100.0 },
         };
         let bvh = Bvh::parse(&source_bvh(&skeleton, &rig, &poses)).unwrap();
-        let options = RetargetOptions { axes: rig.axes, ..RetargetOptions::default() };
+        let options = RetargetOptions { axes: Some(rig.axes), floor: false, ..RetargetOptions::default() };
         let result = retarget(&bvh, &skeleton, &options).unwrap();
         prop_assert!((result.metres_per_unit - 1.0 / rig.units_per_metre).abs() < 1e-6);
         prop_assert!(result.source_joints.iter().all(Option::is_some));
@@ -815,7 +824,7 @@ fn t_pose_and_raised_arm_come_through() {
 
     let bvh = Bvh::parse(&source_bvh(&skeleton, &rig, &poses)).unwrap();
     assert_eq!(bvh.joints.len(), 22, "joint_Root + 21 joints");
-    let result = retarget(&bvh, &skeleton, &RetargetOptions::default()).unwrap();
+    let result = retarget(&bvh, &skeleton, &exact()).unwrap();
     assert!(result.twists_from_motion);
     assert_eq!(result.source_joints[Joint::UpperChest.index()], None);
     assert!((result.root_scale - 0.01).abs() < 1e-7);
@@ -870,7 +879,7 @@ fn a_t_pose_source_with_other_proportions_maps_to_our_t_pose() {
     let mut step = theirs.rest_pose();
     step.root_position.z += 0.55;
     let bvh = Bvh::parse(&source_bvh(&theirs, &rig, &[theirs.rest_pose(), step])).unwrap();
-    let result = retarget(&bvh, &ours, &RetargetOptions::default()).unwrap();
+    let result = retarget(&bvh, &ours, &exact()).unwrap();
     assert!(!result.twists_from_motion);
     for pose in &result.poses {
         for q in pose.local_rotations.iter().skip(1) {
@@ -886,7 +895,7 @@ fn a_t_pose_source_with_other_proportions_maps_to_our_t_pose() {
     // Without scaling to the legs: metres, shifted by the difference in hips-to-ankle drop.
     let options = RetargetOptions {
         scale_root_to_legs: false,
-        ..RetargetOptions::default()
+        ..exact()
     };
     let result = retarget(&bvh, &ours, &options).unwrap();
     let drop = |s: &Skeleton| {
@@ -923,7 +932,7 @@ fn names_map_case_insensitively() {
     }
 
     // Extra names come first; without any joint for the hips, a clear error.
-    let text = SMALL.replace("ROOT root", "ROOT pelvis");
+    let text = SMALL.replace("ROOT root", "ROOT blob");
     let bvh = Bvh::parse(&text).unwrap();
     let err = retarget(
         &bvh,
@@ -932,9 +941,9 @@ fn names_map_case_insensitively() {
     )
     .unwrap_err()
     .to_string();
-    assert!(err.contains("Hips") && err.contains("pelvis"), "{err}");
+    assert!(err.contains("Hips") && err.contains("blob"), "{err}");
     let options = RetargetOptions {
-        names: vec![("PELVIS".into(), Joint::Hips)],
+        names: vec![("BLOB".into(), Joint::Hips)],
         ..RetargetOptions::default()
     };
     let result = retarget(&bvh, &Skeleton::default_adult(), &options).unwrap();
@@ -970,7 +979,7 @@ fn names_map_case_insensitively() {
     assert!(err.contains("Spine") && err.contains("LeftHand"), "{err}");
 
     let options = RetargetOptions {
-        axes: Mat3::from_diagonal(Vec3::new(2.0, 1.0, 1.0)),
+        axes: Some(Mat3::from_diagonal(Vec3::new(2.0, 1.0, 1.0))),
         ..RetargetOptions::default()
     };
     let err = retarget(&bvh, &Skeleton::default_adult(), &options)
@@ -1247,6 +1256,146 @@ proptest! {
             prop_assert_eq!(again.as_ref(), Some(&bvh));
             if let Ok(result) = retarget(&bvh, &Skeleton::default_adult(), &RetargetOptions::default()) {
                 prop_assert!(result.poses.iter().all(Pose::is_finite));
+            }
+        }
+    }
+}
+
+/// A few seconds of a figure bobbing on bent knees and swaying its arms while stepping along
+/// +X, facing +Z: enough of a body to show up, left and forward.
+fn bobbing(skeleton: &Skeleton) -> Vec<Pose> {
+    (0..60)
+        .map(|f| {
+            let t = f as f32 / 30.0;
+            let bend = 0.3 + 0.2 * (t * 6.0).sin();
+            let mut pose = skeleton.rest_pose();
+            pose.root_position += Vec3::new(0.2 * t, -0.05 - 0.05 * (t * 6.0).sin(), 0.0);
+            for (hip, knee, ankle) in [
+                (Joint::LeftUpperLeg, Joint::LeftLowerLeg, Joint::LeftFoot),
+                (Joint::RightUpperLeg, Joint::RightLowerLeg, Joint::RightFoot),
+            ] {
+                pose.set_rotation(hip, Quat::from_rotation_x(-bend));
+                pose.set_rotation(knee, Quat::from_rotation_x(2.0 * bend));
+                pose.set_rotation(ankle, Quat::from_rotation_x(-bend));
+            }
+            pose.set_rotation(
+                Joint::LeftUpperArm,
+                Quat::from_rotation_z(-1.2 + 0.3 * t.sin()),
+            );
+            pose.set_rotation(
+                Joint::RightUpperArm,
+                Quat::from_rotation_z(1.2 - 0.3 * t.sin()),
+            );
+            pose
+        })
+        .collect()
+}
+
+/// Y-up and Z-up files, right- and left-handed, in metres and centimetres, and a Y-up skeleton
+/// stood up in a Z-up world by its root (as AMASS's re-exports are): each stands up the way
+/// it was captured, its left on its left, feet on the floor even when the file's floor is not
+/// at 0.
+#[test]
+fn axes_handedness_and_floor_are_found_from_the_motion() {
+    let skeleton = Skeleton::default_adult();
+    let poses = bobbing(&skeleton);
+    let mirror_x = Mat3::from_diagonal(Vec3::new(-1.0, 1.0, 1.0));
+    let z_up = RetargetOptions::z_up().axes.unwrap();
+    // A joint's T-pose orientation that lays a Y-up skeleton into a Z-up file's axes.
+    let lying = Quat::from_mat3(&z_up.transpose());
+    // How far the motion as given is lifted to stand on the floor.
+    let own_floor = {
+        let bvh = Bvh::parse(&source_bvh(
+            &skeleton,
+            &SourceRig {
+                names: MIXAMO_NAMES,
+                orient: [Quat::IDENTITY; JOINT_COUNT],
+                axes: Mat3::IDENTITY,
+                units_per_metre: 1.0,
+            },
+            &poses,
+        ))
+        .unwrap();
+        retarget(&bvh, &skeleton, &RetargetOptions::default())
+            .unwrap()
+            .floor_shift_m
+    };
+    for (label, axes, orient, units, expected) in [
+        (
+            "Y up",
+            Mat3::IDENTITY,
+            Quat::IDENTITY,
+            100.0,
+            "Y up, right-handed",
+        ),
+        ("Z up", z_up, Quat::IDENTITY, 1.0, "Z up, right-handed"),
+        (
+            "Y up, left-handed",
+            mirror_x,
+            Quat::IDENTITY,
+            1.0,
+            "Y up, left-handed",
+        ),
+        (
+            "Z up, left-handed",
+            mirror_x * z_up,
+            Quat::IDENTITY,
+            100.0,
+            "Z up, left-handed",
+        ),
+        (
+            "Y-up skeleton in a Z-up world",
+            z_up,
+            lying,
+            1.0,
+            "Z up, right-handed",
+        ),
+    ] {
+        let rig = SourceRig {
+            names: MIXAMO_NAMES,
+            orient: [orient; JOINT_COUNT],
+            axes,
+            units_per_metre: units,
+        };
+        // The file's floor 0.3 m below its origin.
+        let lowered: Vec<Pose> = poses
+            .iter()
+            .map(|p| {
+                let mut p = *p;
+                p.root_position.y -= 0.3;
+                p
+            })
+            .collect();
+        let bvh = Bvh::parse(&source_bvh(&skeleton, &rig, &lowered)).unwrap();
+        let result = retarget(&bvh, &skeleton, &RetargetOptions::default()).unwrap();
+        assert!(result.axes_detected, "{label}");
+        assert_eq!(describe_axes(&result.axes), expected, "{label}");
+        assert!(
+            result.axes.abs_diff_eq(axes, 1e-5),
+            "{label}: {} vs {axes}",
+            result.axes
+        );
+        assert!(
+            !result.twists_from_motion,
+            "{label}: the zero pose is a T-pose"
+        );
+        assert!(
+            (result.floor_shift_m - 0.3 - own_floor).abs() < 1e-3,
+            "{label}: {} against {own_floor} + 0.3",
+            result.floor_shift_m
+        );
+        assert!(
+            result.bone_error_deg < 0.1,
+            "{label}: {}",
+            result.bone_error_deg
+        );
+        let lift = Vec3::Y * own_floor;
+        for (f, (a, b)) in poses.iter().zip(&result.poses).enumerate() {
+            let (pa, _) = fk(&skeleton, a);
+            let (pb, _) = fk(&skeleton, b);
+            for joint in Joint::ALL {
+                let d = (pa[joint.index()] + lift - pb[joint.index()]).length();
+                assert!(d < 1e-3, "{label} frame {f} {joint}: {d} m");
             }
         }
     }
