@@ -15,7 +15,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Quat, Vec3};
-use model::bvh::{Bvh, RetargetOptions, retarget};
+use model::bvh::{Bvh, RetargetOptions, import};
 use model::retrieval::ClipLibrary;
 use model::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use serde::Deserialize;
@@ -138,7 +138,7 @@ impl PoseBank {
             message,
         };
         let bvh = Bvh::parse(&read_bvh(&file.bvh)?).map_err(|e| bvh_err(e.to_string()))?;
-        let poses = retarget(
+        let poses = import(
             &bvh,
             &Skeleton::default_adult(),
             &RetargetOptions::default(),

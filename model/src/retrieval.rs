@@ -117,12 +117,55 @@ fn shortest(q: Quat) -> Quat {
     if q.w < 0.0 { -q } else { q }
 }
 
+/// What a clip is cut by and matched on, frame by frame: the beat and bar the dance is on, its
+/// tempo and how loud the music under it is. From the music for dances captured with their
+/// songs ([`ClipLibrary::from_dances`]); from the motion's own beat grid for dances without.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameCue {
+    /// Beat phase, [0, 1) (0 on the beat); `None` where unknown.
+    pub beat_phase: Option<f32>,
+    /// Bar phase, [0, 1).
+    pub bar_phase: f32,
+    /// Tempo, BPM; not finite or ≤ 0 where unknown.
+    pub tempo: f32,
+    /// Music energy, dBFS; not finite where unknown.
+    pub energy: f32,
+}
+
+impl FrameCue {
+    /// The cue of one frame of music features.
+    pub fn of_music(m: &[f32; FEATURE_DIM]) -> FrameCue {
+        FrameCue {
+            beat_phase: phase_of(m[FeatureLayout::BEAT_SIN], m[FeatureLayout::BEAT_COS]),
+            bar_phase: phase_of(m[FeatureLayout::BAR_SIN], m[FeatureLayout::BAR_COS])
+                .unwrap_or(0.0),
+            tempo: m[FeatureLayout::TEMPO],
+            energy: m[FeatureLayout::ENERGY],
+        }
+    }
+}
+
 impl ClipLibrary {
     /// Cuts each (poses, music features) pair, 25 fps and frame-aligned, into one-beat clips.
     ///
     /// Pairs of different lengths are cut over their common length. Beats whose poses are not
     /// finite or whose length is implausible are skipped.
     pub fn from_dances(dances: &[(Vec<Pose>, Vec<[f32; FEATURE_DIM]>)]) -> Self {
+        let cued: Vec<(Vec<Pose>, Vec<FrameCue>)> = dances
+            .iter()
+            .map(|(poses, music)| {
+                (
+                    poses.clone(),
+                    music.iter().map(FrameCue::of_music).collect(),
+                )
+            })
+            .collect();
+        Self::from_cues(&cued)
+    }
+
+    /// Cuts each (poses, cues) pair, 25 fps and frame-aligned, into one-beat clips at the
+    /// frames where the beat phase wraps; see [`ClipLibrary::from_dances`].
+    pub fn from_cues(dances: &[(Vec<Pose>, Vec<FrameCue>)]) -> Self {
         let mut lib = ClipLibrary {
             poses: Vec::new(),
             clips: Vec::new(),
@@ -130,13 +173,13 @@ impl ClipLibrary {
         };
         let mut phases = Vec::new();
         let mut wraps = Vec::new();
-        for (poses, music) in dances {
-            let n = poses.len().min(music.len());
+        for (poses, cues) in dances {
+            let n = poses.len().min(cues.len());
             phases.clear();
             wraps.clear();
             let mut prev: Option<f32> = None;
-            for (i, m) in music.iter().enumerate().take(n) {
-                let p = phase_of(m[FeatureLayout::BEAT_SIN], m[FeatureLayout::BEAT_COS]).or(prev);
+            for (i, c) in cues.iter().enumerate().take(n) {
+                let p = c.beat_phase.or(prev);
                 if let (Some(a), Some(b)) = (prev, p)
                     && b < a - 0.5
                 {
@@ -153,7 +196,7 @@ impl ClipLibrary {
                 {
                     continue;
                 }
-                lib.push_clip(&poses[s..=e], &music[s..=e], phases[s], phases[e]);
+                lib.push_clip(&poses[s..=e], &cues[s..=e], phases[s], phases[e]);
             }
         }
         let mut motions: Vec<f32> = lib.clips.iter().map(|c| c.motion).collect();
@@ -162,14 +205,8 @@ impl ClipLibrary {
         lib
     }
 
-    /// Appends one clip made of `poses` (len + 1 frames) and the music under them.
-    fn push_clip(
-        &mut self,
-        poses: &[Pose],
-        music: &[[f32; FEATURE_DIM]],
-        phase_start: f32,
-        phase_end: f32,
-    ) {
+    /// Appends one clip made of `poses` (len + 1 frames) and the cues under them.
+    fn push_clip(&mut self, poses: &[Pose], cues: &[FrameCue], phase_start: f32, phase_end: f32) {
         let len = poses.len() - 1;
         let h0 = heading(poses[0].local_rotations[0]);
         let to_local = yaw(-h0);
@@ -182,15 +219,13 @@ impl ClipLibrary {
             self.poses.push(r);
         }
         let (mut tempo_sum, mut tempo_n, mut energy_sum, mut energy_n) = (0.0, 0, 0.0, 0);
-        for m in &music[..len] {
-            let t = m[FeatureLayout::TEMPO];
-            if t.is_finite() && t > 0.0 {
-                tempo_sum += t;
+        for c in &cues[..len] {
+            if c.tempo.is_finite() && c.tempo > 0.0 {
+                tempo_sum += c.tempo;
                 tempo_n += 1;
             }
-            let e = m[FeatureLayout::ENERGY];
-            if e.is_finite() {
-                energy_sum += e;
+            if c.energy.is_finite() {
+                energy_sum += c.energy;
                 energy_n += 1;
             }
         }
@@ -204,11 +239,7 @@ impl ClipLibrary {
         } else {
             -60.0
         };
-        let bar_phase = phase_of(
-            music[0][FeatureLayout::BAR_SIN],
-            music[0][FeatureLayout::BAR_COS],
-        )
-        .unwrap_or(0.0);
+        let bar_phase = cues[0].bar_phase;
         let motion = poses
             .windows(2)
             .map(|w| {

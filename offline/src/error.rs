@@ -96,6 +96,33 @@ pub enum OfflineError {
         /// The underlying I/O error.
         error: io::Error,
     },
+    /// A folder could not be listed.
+    #[error("cannot read the folder {}: {error}", path.display())]
+    Folder {
+        /// The folder.
+        path: PathBuf,
+        /// The underlying I/O error.
+        error: io::Error,
+    },
+    /// A folder of dances holds no BVH file.
+    #[error("{}: no .bvh file in the folder", .0.display())]
+    NoDances(PathBuf),
+    /// A dance file could not be read or put on the rig.
+    #[error("{}: {source}", path.display())]
+    Dance {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        source: ModelError,
+    },
+    /// A joint map file could not be read.
+    #[error("joint map {}: {reason}", path.display())]
+    JointMap {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// The data set's arrays could not be put into its `.npz` file.
     #[error("{reason}")]
     Npz {
@@ -115,7 +142,11 @@ impl OfflineError {
             | OfflineError::Corrupt { path, .. }
             | OfflineError::DataSetFolder { path, .. }
             | OfflineError::ReferenceBeats { path, .. }
-            | OfflineError::Write { path, .. } => Some(path),
+            | OfflineError::Write { path, .. }
+            | OfflineError::Folder { path, .. }
+            | OfflineError::NoDances(path)
+            | OfflineError::Dance { path, .. }
+            | OfflineError::JointMap { path, .. } => Some(path),
             OfflineError::Analysis { .. }
             | OfflineError::Model(_)
             | OfflineError::Speed { .. }

@@ -13,6 +13,7 @@ pub mod dataset;
 pub mod decode;
 pub mod error;
 pub mod files;
+pub mod moves;
 pub mod pool;
 pub mod progress;
 pub mod real_music;

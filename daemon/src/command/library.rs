@@ -22,10 +22,20 @@ pub enum LibraryCommand {
         #[arg(long, default_value_t = 16)]
         count: usize,
     },
-    /// Cut the clip library from the tang2018 training split and write it (the shipped one is
-    /// configs/clips/tang2018-train.danclips).
+    /// Cut a clip library and write it: from a folder of your own dances (`--bvh DIR`, any BVH
+    /// rig, no music needed: the beat is found from the motion), or from the tang2018 training
+    /// split (the shipped one is configs/clips/tang2018-train.danclips).
     Build {
-        /// The shared data folder (holds tang2018/ and tang2018-beats/).
+        /// A folder of BVH dances to cut the library from (every .bvh file directly in it).
+        #[arg(long, value_name = "DIR")]
+        bvh: Option<PathBuf>,
+        /// The library's name, as the dancer and the view show it (default: the folder's name).
+        #[arg(long)]
+        name: Option<String>,
+        /// How the dance files' joints and axes are read.
+        #[command(flatten)]
+        import: super::import_args::ImportArgs,
+        /// The shared data folder (holds tang2018/ and tang2018-beats/), without `--bvh`.
         #[arg(long, default_value = "../shared/data")]
         data: PathBuf,
         /// Output file.
@@ -44,10 +54,21 @@ pub enum LibraryCommand {
 pub fn library(what: LibraryCommand) -> Result<()> {
     match what {
         LibraryCommand::Build {
+            bvh: Some(dir),
+            name,
+            import,
+            out,
+            max_poses,
+            jobs,
+            ..
+        } => build_from_moves(&dir, name, &import, &out, max_poses, jobs),
+        LibraryCommand::Build {
+            bvh: None,
             data,
             out,
             max_poses,
             jobs,
+            ..
         } => build(&data, &out, max_poses, jobs),
         LibraryCommand::Poses { out, count } => poses(&out, count),
     }
@@ -91,4 +112,122 @@ fn build(data: &Path, out: &Path, max_poses: usize, jobs: usize) -> Result<()> {
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// `library build --bvh DIR`: the library of a folder of dances without music.
+fn build_from_moves(
+    dir: &Path,
+    name: Option<String>,
+    import: &super::import_args::ImportArgs,
+    out: &Path,
+    max_poses: usize,
+    jobs: usize,
+) -> Result<()> {
+    use offline::moves::{MIN_CONFIDENCE, library, read_moves_folder};
+    let started = Instant::now();
+    let settings = import.settings()?;
+    let read = read_moves_folder(dir, &settings, jobs)?;
+    let mut dances = Vec::new();
+    let mut failed = Vec::new();
+    for (path, result) in read {
+        match result {
+            Ok(d) => dances.push(d),
+            Err(e) => failed.push((path, e)),
+        }
+    }
+    let (full, clips) = library(&dances);
+    anyhow::ensure!(
+        !full.clips.is_empty(),
+        "no dance in {} gave a clip ({} could not be read, {} had no beat the motion confirms)",
+        dir.display(),
+        failed.len(),
+        dances.len()
+    );
+    let name = name.unwrap_or_else(|| {
+        dir.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "moves".into())
+    });
+    let library = full.subset(max_poses);
+    let kept: Vec<String> = dances
+        .iter()
+        .zip(&clips)
+        .filter(|(_, c)| **c > 0)
+        .map(|(d, _)| d.name.clone())
+        .collect();
+    let meta = moves_metadata(&name, &library, &kept, full.poses.len());
+    let bytes = library.to_bytes(&meta);
+    write_atomic(out, &bytes).with_context(|| format!("writing {}", out.display()))?;
+
+    println!(
+        "| dance | seconds | tempo (BPM) | confidence | bar | clips | joints named as | axes | unit | unmapped joints | bone error, limbs / girdles (°) |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    for (d, c) in dances.iter().zip(&clips) {
+        let bar = d
+            .grid
+            .beats_per_bar
+            .map_or("–".to_owned(), |b| format!("{b}/4"));
+        let unmapped = if d.import.unmapped.is_empty() {
+            "none".to_owned()
+        } else if d.import.unmapped.len() <= 3 {
+            d.import.unmapped.join(", ")
+        } else {
+            format!(
+                "{} ({}, …)",
+                d.import.unmapped.len(),
+                d.import.unmapped[..2].join(", ")
+            )
+        };
+        let clips = if *c > 0 {
+            c.to_string()
+        } else {
+            format!("skipped (confidence < {MIN_CONFIDENCE})")
+        };
+        println!(
+            "| {} | {:.1} | {:.1} | {:.2} | {bar} | {clips} | {} | {} | {} | {unmapped} | {:.1} / {:.1} |",
+            d.name,
+            d.seconds,
+            d.grid.tempo_bpm,
+            d.grid.confidence,
+            d.import.convention,
+            d.import.axes,
+            d.import.unit(),
+            d.import.bone_error_deg,
+            d.import.girdle_error_deg,
+        );
+    }
+    for (_, e) in &failed {
+        println!("skipped {e}");
+    }
+    println!(
+        "{}: library {name:?}, {} clips, {} poses ({:.2} MB) from {} of {} dances in {:.1} s",
+        out.display(),
+        library.clips.len(),
+        library.poses.len(),
+        bytes.len() as f64 / 1e6,
+        kept.len(),
+        dances.len() + failed.len(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Metadata stored in a library cut from a folder of dances: its name and what it was cut from.
+fn moves_metadata(
+    name: &str,
+    library: &model::retrieval::ClipLibrary,
+    dances: &[String],
+    full_poses: usize,
+) -> String {
+    let json = |s: &str| s.replace('\\', "\\\\").replace('"', "\\\"");
+    let names: Vec<String> = dances.iter().map(|n| format!("\"{}\"", json(n))).collect();
+    format!(
+        "{{\"kind\": \"danced retrieval clip library\", \"name\": \"{}\", \"fps\": {}, \"clips\": {}, \"poses\": {}, \"poses_before_subsetting\": {full_poses}, \"source\": \"dances without music, cut on the beat found from their motion\", \"dances\": [{}]}}",
+        json(name),
+        model::retrieval::RETRIEVAL_FPS,
+        library.clips.len(),
+        library.poses.len(),
+        names.join(", ")
+    )
 }

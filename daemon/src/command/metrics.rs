@@ -19,6 +19,9 @@ pub struct MetricsArgs {
     /// Song time of the motion's first frame, seconds.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub offset: f64,
+    /// How the file's joints and axes are read.
+    #[command(flatten)]
+    pub import: super::import_args::ImportArgs,
 }
 
 /// Runs `danced metrics`.
@@ -27,12 +30,11 @@ pub fn metrics(args: &MetricsArgs) -> Result<()> {
         bvh: bvh_path,
         audio,
         offset,
+        import,
     } = args;
     let offset = *offset;
-    let bvh = model::bvh::Bvh::read(bvh_path)?;
     let skeleton = Skeleton::default_adult();
-    let motion = model::bvh::retarget(&bvh, &skeleton, &Default::default())
-        .with_context(|| format!("retargeting {} onto the rig", bvh_path.display()))?;
+    let motion = offline::moves::read_dance(bvh_path, &import.settings()?)?;
     let positions = skeleton.trajectory(&motion.poses);
     let track = JointTrack::new(&positions, JOINT_COUNT, motion.fps)?;
     let opts = AnalyzeOptions::native(None);

@@ -13,6 +13,7 @@ pub mod demo;
 pub mod devices;
 pub mod eval;
 pub mod generate;
+pub mod import_args;
 pub mod library;
 pub mod metrics;
 pub mod moved;

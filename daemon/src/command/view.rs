@@ -7,7 +7,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use model::bvh::{Bvh, RetargetOptions, retarget};
 use model::rig::Skeleton;
 
 use crate::view::assets::{Assets, audio_content_type};
@@ -28,15 +27,15 @@ pub struct ViewArgs {
     /// Stop after this many seconds (serves until Ctrl-C otherwise).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// How the file's joints and axes are read.
+    #[command(flatten)]
+    pub import: super::import_args::ImportArgs,
 }
 
 /// Runs `danced view`.
 pub fn view(args: &ViewArgs) -> Result<()> {
-    let bvh =
-        Bvh::read(&args.dance).with_context(|| format!("reading {}", args.dance.display()))?;
     let skeleton = Skeleton::default_adult();
-    let dance = retarget(&bvh, &skeleton, &RetargetOptions::default())
-        .with_context(|| format!("fitting {} to the rig", args.dance.display()))?;
+    let dance = offline::moves::read_dance(&args.dance, &args.import.settings()?)?;
     let (packets, frames) = dance_packets(&dance.poses, dance.fps);
     let mut assets = Assets::page(&skeleton);
     assets.insert(
