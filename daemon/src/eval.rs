@@ -100,6 +100,8 @@ pub struct EvalSet {
     validation: Vec<EvalDance>,
     /// Training ground-truth world positions, one Vec per dance.
     train_positions: Vec<Vec<glam::Vec3>>,
+    /// Each training dance's style ([`STYLES`] index), where its name says it.
+    train_styles: Vec<Option<usize>>,
     /// Training kinetic features (5 s windows).
     train_kinetic: Vec<Vec<f64>>,
     /// Training kinetic features of [`TRANSITION_S`] windows.
@@ -132,12 +134,13 @@ pub struct StyleClassifier {
 }
 
 impl StyleClassifier {
-    /// Fits the centroids of `windows` (style, kinetic features).
+    /// Fits the centroids of `windows` (class, kinetic features): one per class present.
     pub fn fit(windows: &[(usize, Vec<f64>)]) -> Option<Self> {
         let all: Vec<Vec<f64>> = windows.iter().map(|w| w.1.clone()).collect();
         let norm = model::metrics::FeatureNormaliser::fit(&all).ok()?;
         let mut centroids = Vec::new();
-        for style in 0..STYLES.len() {
+        let classes = windows.iter().map(|w| w.0 + 1).max().unwrap_or(0);
+        for style in 0..classes {
             let members: Vec<Vec<f64>> = windows
                 .iter()
                 .filter(|w| w.0 == style)
@@ -208,7 +211,7 @@ fn window_kinetics(positions: &[glam::Vec3]) -> Vec<Vec<f64>> {
 }
 
 /// Kinetic features of every whole window of `frames` frames of a track's positions.
-fn windows_of(positions: &[glam::Vec3], frames: usize) -> Vec<Vec<f64>> {
+pub fn windows_of(positions: &[glam::Vec3], frames: usize) -> Vec<Vec<f64>> {
     positions
         .chunks_exact(frames * JOINT_COUNT)
         .filter_map(|w| {
@@ -233,6 +236,7 @@ impl EvalSet {
         let mut set = EvalSet {
             validation: Vec::new(),
             train_positions: Vec::new(),
+            train_styles: Vec::new(),
             train_kinetic: Vec::new(),
             train_kinetic_short: Vec::new(),
             styles: None,
@@ -251,6 +255,7 @@ impl EvalSet {
                         .extend(windows_of(&p, style_frames).into_iter().map(|w| (style, w)));
                 }
                 set.train_positions.push(p);
+                set.train_styles.push(style_of(&b.name));
             }
             if b.validation != (scored == ScoredDances::Validation) {
                 continue;
@@ -287,6 +292,16 @@ impl EvalSet {
         self.validation
             .iter()
             .map(|d| (d.name.as_str(), d.poses.as_slice(), d.music.as_slice()))
+    }
+
+    /// World joint positions of every training dance (25 fps, [`JOINT_COUNT`] a frame).
+    pub fn training_positions(&self) -> &[Vec<glam::Vec3>] {
+        &self.train_positions
+    }
+
+    /// Each training dance's style ([`STYLES`] index), in [`EvalSet::training_positions`] order.
+    pub fn training_styles(&self) -> &[Option<usize>] {
+        &self.train_styles
     }
 
     /// Names of the validation dances scored.

@@ -11,6 +11,7 @@ use daemon::command::bench_cues::{BenchCuesArgs, bench_cues};
 use daemon::command::bench_lag::{BenchLagArgs, bench_lag};
 use daemon::command::bench_live::{BenchLiveArgs, bench_live};
 use daemon::command::bench_model::{BenchModelArgs, bench_model};
+use daemon::command::bench_moves::{BenchMovesArgs, bench_moves};
 use daemon::command::bench_stage::{BenchStageArgs, bench_stage};
 use daemon::command::bvh_export::{BvhArgs, bvh_export};
 use daemon::command::dataset::{DatasetCommand, dataset};
@@ -96,6 +97,9 @@ enum BenchCommand {
     Model(BenchModelArgs),
     /// How far each dancer wanders on each stage mode, and what keeping it on the stage costs.
     Stage(BenchStageArgs),
+    /// A clip library cut from your own dances (and the built-in one) danced to annotated
+    /// songs: beat by tempo band, freezes, foot skating, and whether its moves show.
+    Moves(BenchMovesArgs),
 }
 
 fn main() -> Result<()> {
@@ -117,6 +121,7 @@ fn main() -> Result<()> {
             BenchCommand::Cues(args) => bench_cues(args),
             BenchCommand::Model(args) => bench_model(&args),
             BenchCommand::Stage(args) => bench_stage(args),
+            BenchCommand::Moves(args) => bench_moves(args),
         },
         Command::Generate(args) => generate(&args),
         Command::View(args) => view(&args),
