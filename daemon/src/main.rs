@@ -11,6 +11,7 @@ use daemon::command::bench_cues::{BenchCuesArgs, bench_cues};
 use daemon::command::bench_lag::{BenchLagArgs, bench_lag};
 use daemon::command::bench_live::{BenchLiveArgs, bench_live};
 use daemon::command::bench_model::{BenchModelArgs, bench_model};
+use daemon::command::bench_motion_beats::{BenchMotionBeatsArgs, bench_motion_beats};
 use daemon::command::bench_moves::{BenchMovesArgs, bench_moves};
 use daemon::command::bench_stage::{BenchStageArgs, bench_stage};
 use daemon::command::bvh_export::{BvhArgs, bvh_export};
@@ -100,6 +101,8 @@ enum BenchCommand {
     /// A clip library cut from your own dances (and the built-in one) danced to annotated
     /// songs: beat by tempo band, freezes, foot skating, and whether its moves show.
     Moves(BenchMovesArgs),
+    /// The beat grid found from each tang2018 dance's motion alone against its music's beats.
+    MotionBeats(BenchMotionBeatsArgs),
 }
 
 fn main() -> Result<()> {
@@ -122,6 +125,7 @@ fn main() -> Result<()> {
             BenchCommand::Model(args) => bench_model(&args),
             BenchCommand::Stage(args) => bench_stage(args),
             BenchCommand::Moves(args) => bench_moves(args),
+            BenchCommand::MotionBeats(args) => bench_motion_beats(args),
         },
         Command::Generate(args) => generate(&args),
         Command::View(args) => view(&args),

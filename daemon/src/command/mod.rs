@@ -6,6 +6,7 @@ pub mod bench_cues;
 pub mod bench_lag;
 pub mod bench_live;
 pub mod bench_model;
+pub mod bench_motion_beats;
 pub mod bench_moves;
 pub mod bench_stage;
 pub mod bvh_export;
