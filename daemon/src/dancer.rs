@@ -63,14 +63,75 @@ pub struct SourceSettings<'a> {
     pub foot_plant: Option<f32>,
     /// Neural model file.
     pub model: Option<&'a Path>,
-    /// Clip library file.
-    pub library: Option<&'a Path>,
+    /// Clip libraries of the retrieval dancer, the first danced first (none: the built-in).
+    pub libraries: &'a [LibraryChoice],
     /// The neural network alone: every safety net off but the non-finite guard.
     pub network_only: bool,
     /// Where the neural dancer sends key poses (`None`: its default, the overlay).
     pub key_route: Option<model::source::KeyPoseRoute>,
     /// Where on the floor it dances.
     pub stage: StageSettings,
+}
+
+/// One clip library the retrieval dancer holds: its file and, optionally, the name performers
+/// switch to it by (default: the name it was built with, else its file name).
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LibraryChoice {
+    /// The library file (`danced library build` writes them).
+    pub path: std::path::PathBuf,
+    /// Its name for `/danced/control/moves`, the status line and the view.
+    pub name: Option<String>,
+}
+
+impl LibraryChoice {
+    /// A library file with no name of its own.
+    pub fn file(path: impl Into<std::path::PathBuf>) -> Self {
+        LibraryChoice {
+            path: path.into(),
+            name: None,
+        }
+    }
+}
+
+/// Name of the built-in clip library.
+pub const SHIPPED_CLIPS_NAME: &str = "tang2018";
+
+/// The libraries `choices` name (the built-in one when none), each with its name.
+pub fn load_libraries(choices: &[LibraryChoice]) -> Result<Vec<(String, ClipLibrary)>> {
+    if choices.is_empty() {
+        let (library, _) = load_library(None)?;
+        return Ok(vec![(SHIPPED_CLIPS_NAME.to_owned(), library)]);
+    }
+    let mut out: Vec<(String, ClipLibrary)> = Vec::with_capacity(choices.len());
+    for choice in choices {
+        let (library, metadata) = load_library(Some(&choice.path))?;
+        let name = choice
+            .name
+            .clone()
+            .or_else(|| {
+                serde_json::from_str::<serde_json::Value>(&metadata)
+                    .ok()?
+                    .get("name")?
+                    .as_str()
+                    .map(str::to_owned)
+            })
+            .or_else(|| {
+                choice
+                    .path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+            })
+            .unwrap_or_else(|| format!("library {}", out.len()));
+        if out.iter().any(|(n, _)| n.eq_ignore_ascii_case(&name)) {
+            bail!(
+                "two clip libraries are called {name:?}: name one of them ({})",
+                choice.path.display()
+            );
+        }
+        out.push((name, library));
+    }
+    Ok(out)
 }
 
 /// `source` on the stage `settings` describe (free: its motion exactly as made).
@@ -140,7 +201,7 @@ pub fn open_source(
 ) -> Result<Box<dyn MotionSource + Send>> {
     let source: Box<dyn MotionSource + Send> = match kind {
         SourceKind::Neural => {
-            if settings.library.is_some() {
+            if !settings.libraries.is_empty() {
                 bail!("a clip library is for the retrieval source, not the neural one");
             }
             Box::new(configured_neural_dancer(settings, seed)?)
@@ -154,8 +215,14 @@ pub fn open_source(
                     "--network-only is for the neural source: the retrieval dancer has no network"
                 );
             }
-            let (library, _) = load_library(settings.library)?;
-            Box::new(RetrievalDancer::new(library, seed).context("starting the retrieval dancer")?)
+            let libraries = load_libraries(settings.libraries)?
+                .into_iter()
+                .map(|(_, l)| l)
+                .collect();
+            Box::new(
+                RetrievalDancer::with_libraries(libraries, seed)
+                    .context("starting the retrieval dancer")?,
+            )
         }
     };
     Ok(on_stage(source, settings.stage))

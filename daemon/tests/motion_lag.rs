@@ -16,7 +16,7 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
     let settings = SourceSettings {
         network_only: false,
         model: None,
-        library: None,
+        libraries: &[],
         beat_accent: None,
         foot_plant: None,
         key_route: None,

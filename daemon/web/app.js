@@ -241,6 +241,9 @@ function showStatus(s) {
   $('style').textContent = s.style == null ? '–' : (s.style_auto ? `${s.style} (auto)` : s.style);
   // Where key poses go, once no key is pending (none for a dancer without a route).
   $('route').textContent = s.key_route ?? '–';
+  // The set of moves danced (none for a dancer with one).
+  $('moves').textContent = s.moves ?? '–';
+  if (s.moves && document.activeElement !== $('movesSelect')) $('movesSelect').value = s.moves;
   if (s.key_route && document.activeElement !== $('routeSelect')) $('routeSelect').value = s.key_route;
   const rate = state.hello?.model_rate_hz || 25;
   $('key').textContent = s.key_pose === 'pending'
@@ -318,6 +321,14 @@ function onHello(h) {
   document.body.classList.toggle('no-style', !honours.style);
   document.body.classList.toggle('no-route', !honours.key_route);
   document.body.classList.toggle('no-accent', !honours.beat_accent);
+  const moves = h.moves ?? [];
+  document.body.classList.toggle('no-moves', moves.length < 2);
+  $('movesSelect').replaceChildren(...moves.map((name) => {
+    const o = document.createElement('option');
+    o.value = name;
+    o.textContent = name;
+    return o;
+  }));
   $('poses').replaceChildren(...h.poses.map((name) => {
     const b = document.createElement('button');
     b.textContent = name;
@@ -420,6 +431,7 @@ $('temperature').oninput = throttled((e) => send('/danced/control/temperature', 
 $('accentSlider').oninput = throttled((e) => send('/danced/control/accent', [['f', Number(e.target.value)]]), 50);
 $('styleSelect').onchange = (e) => send('/danced/control/style', [['s', e.target.value]]);
 $('routeSelect').onchange = (e) => send('/danced/control/keypose/route', [['s', e.target.value]]);
+$('movesSelect').onchange = (e) => send('/danced/control/moves', [['s', e.target.value], ['s', 'bar']]);
 $('pause').onclick = () => send($('pause').dataset.paused ? '/danced/control/resume' : '/danced/control/pause');
 $('seed').onclick = () => send('/danced/control/seed', [['i', Math.floor(Math.random() * 2147483647)]]);
 

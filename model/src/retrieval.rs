@@ -17,7 +17,10 @@ use crate::ModelError;
 use crate::key_overlay::{KEY_BLEND_FRAMES, KeyOverlay};
 use crate::motion::{heading, yaw};
 use crate::rig::{JOINT_COUNT, Pose};
-use crate::source::{Controls, MotionSource, TravelPreference};
+use crate::source::{
+    Controls, MotionSource, MovesReport, MovesSwitch, SourceControls, SourceReport,
+    TravelPreference,
+};
 
 /// Frame rate of the library and of the dancer's output (tang2018 fits are 25 fps).
 pub const RETRIEVAL_FPS: f64 = 25.0;
@@ -315,8 +318,14 @@ impl Rng {
 /// The v0 motion source: beat-synchronous clip retrieval with inertialization-lite blending.
 #[derive(Clone, Debug)]
 pub struct RetrievalDancer {
-    /// The clips it plays.
-    library: ClipLibrary,
+    /// The libraries it can play, in the order given.
+    libraries: Vec<ClipLibrary>,
+    /// The library it plays.
+    active: usize,
+    /// A switch asked for: the library, and when.
+    pending: Option<(usize, MovesSwitch)>,
+    /// Library switches made since the last reset.
+    switches: u64,
     /// Randomness for temperature sampling.
     rng: Rng,
     /// Whether a clip has been chosen since the last reset.
@@ -378,11 +387,20 @@ impl RetrievalDancer {
 
     /// A dancer playing `library`; fails if the library holds no clip.
     pub fn new(library: ClipLibrary, seed: u64) -> Result<Self, ModelError> {
-        if library.clips.is_empty() {
+        Self::with_libraries(vec![library], seed)
+    }
+
+    /// A dancer holding several libraries, playing the first, switched live by
+    /// [`MotionSource::select_moves`]; fails if there is none or one holds no clip.
+    pub fn with_libraries(libraries: Vec<ClipLibrary>, seed: u64) -> Result<Self, ModelError> {
+        if libraries.is_empty() || libraries.iter().any(|l| l.clips.is_empty()) {
             return Err(ModelError::EmptyClipLibrary);
         }
         let mut d = RetrievalDancer {
-            library,
+            libraries,
+            active: 0,
+            pending: None,
+            switches: 0,
             rng: Rng::new(seed),
             started: false,
             clip: 0,
@@ -419,9 +437,28 @@ impl RetrievalDancer {
         Self::new(ClipLibrary::from_dances(dances), seed)
     }
 
-    /// The clip library.
+    /// The clip library it plays.
     pub fn library(&self) -> &ClipLibrary {
-        &self.library
+        &self.libraries[self.active]
+    }
+
+    /// Makes a pending library switch due at this beat (`bar_phase`: the live bar phase at
+    /// the wrap) the active one; whether it did.
+    fn take_due_switch(&mut self) -> bool {
+        let Some((index, at)) = self.pending else {
+            return false;
+        };
+        // On a bar's first beat the bar phase has just wrapped too: within a beat of 0.
+        let on_bar = self.bar_phase < 0.15 || self.bar_phase > 0.95;
+        if at == MovesSwitch::NextBar && !on_bar {
+            return false;
+        }
+        self.pending = None;
+        if index != self.active {
+            self.active = index;
+            self.switches += 1;
+        }
+        true
     }
 
     /// Index of the clip playing (for debugging and tests).
@@ -473,7 +510,7 @@ impl RetrievalDancer {
     /// The cost of playing `clip` next, given the last output's rotations (hips de-headed), its
     /// velocity in its heading frame and the stage's preferred travel in that frame.
     fn cost(&self, clip: &Clip, hips: Quat, velocity: Vec3, preferred: Option<Vec3>) -> f32 {
-        let lib = &self.library;
+        let lib = &self.libraries[self.active];
         let mut c = W_POSE
             * pose_distance(
                 &self.last_out.local_rotations,
@@ -527,8 +564,13 @@ impl RetrievalDancer {
         });
         self.best_cost = [f32::INFINITY; TOP_K];
         self.best_idx = [0; TOP_K];
-        for i in 0..self.library.clips.len() {
-            let c = self.cost(&self.library.clips[i], hips, velocity, preferred);
+        for i in 0..self.libraries[self.active].clips.len() {
+            let c = self.cost(
+                &self.libraries[self.active].clips[i],
+                hips,
+                velocity,
+                preferred,
+            );
             let c = if c.is_finite() { c } else { f32::MAX };
             if c >= self.best_cost[TOP_K - 1] {
                 continue;
@@ -546,7 +588,7 @@ impl RetrievalDancer {
         if !(t.is_finite() && t > 1e-6) {
             return self.best_idx[0];
         }
-        let n = self.library.clips.len().min(TOP_K);
+        let n = self.libraries[self.active].clips.len().min(TOP_K);
         let c0 = self.best_cost[0];
         let mut weights = [0.0f32; TOP_K];
         let mut total = 0.0;
@@ -567,7 +609,7 @@ impl RetrievalDancer {
 
     /// Fractional frame of the current clip for the live phase.
     fn clip_frame(&self) -> f32 {
-        let clip = &self.library.clips[self.clip];
+        let clip = &self.libraries[self.active].clips[self.clip];
         let span = (1.0 + clip.phase_end - clip.phase_start).max(0.25);
         (self.phase - clip.phase_start) / span * clip.len as f32
     }
@@ -575,8 +617,11 @@ impl RetrievalDancer {
     /// Samples the current clip at the live phase and places it in the world, into `scratch`.
     fn sample_world(&mut self) {
         let u = self.clip_frame();
-        self.library
-            .sample(&self.library.clips[self.clip], u, &mut self.scratch);
+        self.libraries[self.active].sample(
+            &self.libraries[self.active].clips[self.clip],
+            u,
+            &mut self.scratch,
+        );
         let rot = yaw(self.anchor_heading);
         self.scratch.root_position = self.anchor + rot * self.scratch.root_position;
         self.scratch.local_rotations[0] = (rot * self.scratch.local_rotations[0]).normalize();
@@ -601,8 +646,11 @@ impl RetrievalDancer {
     fn switch_to(&mut self, next: usize) {
         self.clip = next;
         let u = self.clip_frame();
-        self.library
-            .sample(&self.library.clips[next], u, &mut self.scratch);
+        self.libraries[self.active].sample(
+            &self.libraries[self.active].clips[next],
+            u,
+            &mut self.scratch,
+        );
         let rel_heading = heading(self.scratch.local_rotations[0]);
         let world_heading = heading(self.last_raw.local_rotations[0]);
         self.anchor_heading = world_heading - rel_heading;
@@ -649,6 +697,7 @@ impl MotionSource for RetrievalDancer {
             self.last_out = self.scratch;
             self.prev_out = self.scratch;
         } else if wrapped {
+            self.take_due_switch();
             let next = self.choose(controls);
             self.switch_to(next);
         } else {
@@ -703,6 +752,8 @@ impl MotionSource for RetrievalDancer {
 
     fn reset(&mut self, seed: u64) {
         self.rng = Rng::new(seed);
+        self.pending = None;
+        self.switches = 0;
         self.started = false;
         self.clip = 0;
         self.phase = 0.0;
@@ -730,6 +781,33 @@ impl MotionSource for RetrievalDancer {
 
     fn prefer_travel(&mut self, preference: Option<TravelPreference>) {
         self.travel_preference = preference;
+    }
+
+    fn controls(&self) -> SourceControls {
+        SourceControls {
+            moves: self.libraries.len() > 1,
+            ..SourceControls::default()
+        }
+    }
+
+    fn report(&self) -> SourceReport {
+        SourceReport {
+            moves: (self.libraries.len() > 1).then_some(MovesReport {
+                active: self.active,
+                count: self.libraries.len(),
+                pending: self.pending.map(|(i, _)| i),
+                switches: self.switches,
+            }),
+            ..SourceReport::default()
+        }
+    }
+
+    fn select_moves(&mut self, index: usize, at: MovesSwitch) -> bool {
+        if index >= self.libraries.len() {
+            return false;
+        }
+        self.pending = Some((index, at));
+        true
     }
 }
 
@@ -826,6 +904,98 @@ mod tests {
                 out
             })
             .collect()
+    }
+
+    /// A library of big, slow-travelling moves unlike [`library`]'s: arms held high, a deep
+    /// bounce.
+    fn other_library() -> ClipLibrary {
+        let dances: Vec<_> = [(100.0, 2.0, 7), (125.0, 2.2, 8)]
+            .into_iter()
+            .map(|(tempo, amp, salt)| {
+                let (mut poses, music) = dance(tempo, amp, salt, 750);
+                for p in &mut poses {
+                    p.set_rotation(Joint::Spine, Quat::from_rotation_x(0.3));
+                    p.root_position.y -= 0.05;
+                }
+                (poses, music)
+            })
+            .collect();
+        ClipLibrary::from_dances(&dances)
+    }
+
+    #[test]
+    fn a_switch_of_moves_lands_on_the_bar_it_was_cued_for_and_glides() {
+        let libraries = vec![ClipLibrary::from_dances(&library()), other_library()];
+        let mut d = RetrievalDancer::with_libraries(libraries, 3).unwrap();
+        assert!(d.controls().moves);
+        assert!(!d.select_moves(2, MovesSwitch::NextBar), "no third library");
+        let (music, phases) = live(120.0, 0.0, 1000);
+        let controls = Controls::default();
+        let skeleton = crate::rig::Skeleton::default_adult();
+        let mut out = Pose::rest();
+        let mut poses = Vec::new();
+        let mut switched_at = None;
+        // Cued mid-bar (beat 9.5 of the song: the third beat of bar 3).
+        let cue = (9.5 * 60.0 / 120.0 * RETRIEVAL_FPS) as usize;
+        for (i, m) in music.iter().enumerate() {
+            if i == cue {
+                assert!(d.select_moves(1, MovesSwitch::NextBar));
+                assert_eq!(d.report().moves.unwrap().pending, Some(1));
+            }
+            d.step(std::slice::from_ref(m), &controls, &mut out);
+            poses.push(out);
+            let report = d.report().moves.unwrap();
+            if switched_at.is_none() && report.active == 1 {
+                switched_at = Some(i);
+            }
+        }
+        let at = switched_at.expect("the switch happened");
+        // The next bar starts at beat 12: frame 150; the dancer hits the beat a little early.
+        let bar_frame = 12.0 * 60.0 / 120.0 * RETRIEVAL_FPS;
+        let late_ms = (at as f64 - bar_frame) / RETRIEVAL_FPS * 1000.0;
+        assert!(
+            late_ms.abs() <= 70.0,
+            "switched at frame {at}, {late_ms} ms from the bar"
+        );
+        assert!(
+            phases[at] < 0.2 || phases[at] > 0.9,
+            "on a beat: {}",
+            phases[at]
+        );
+        let report = d.report().moves.unwrap();
+        assert_eq!(
+            (report.active, report.count, report.pending, report.switches),
+            (1, 2, None, 1)
+        );
+        // The dance is the other library's after the switch: the spine leans.
+        let lean = poses[at + 30]
+            .rotation(Joint::Spine)
+            .angle_between(Quat::IDENTITY);
+        assert!(lean > 0.2, "{lean}");
+        // It glides: the root and the joints move no more at the switch than while dancing.
+        let step = |i: usize| (poses[i].root_position - poses[i - 1].root_position).length();
+        let turn = |i: usize| {
+            let (mut a, mut b) = ([Vec3::ZERO; JOINT_COUNT], [Vec3::ZERO; JOINT_COUNT]);
+            skeleton.world_positions(&poses[i - 1], &mut a);
+            skeleton.world_positions(&poses[i], &mut b);
+            a.iter()
+                .zip(&b)
+                .map(|(p, q)| (*p - *q).length())
+                .fold(0.0f32, f32::max)
+        };
+        let around = at - 2..at + 8;
+        let normal = (50..at - 10).chain(at + 20..poses.len());
+        let largest_step = around.clone().map(step).fold(0.0f32, f32::max);
+        assert!(
+            largest_step <= 0.1,
+            "root step {largest_step} m at the switch"
+        );
+        let normal_jump = normal.map(turn).fold(0.0f32, f32::max);
+        let switch_jump = around.map(turn).fold(0.0f32, f32::max);
+        assert!(
+            switch_jump <= normal_jump,
+            "joints move {switch_jump} m in a frame at the switch, {normal_jump} m at most otherwise"
+        );
     }
 
     #[test]

@@ -117,6 +117,8 @@ pub struct SourceControls {
     pub key_route: bool,
     /// [`Controls::beat_accent`]: a source that retimes its own motion within the beat.
     pub beat_accent: bool,
+    /// [`MotionSource::select_moves`]: a source holding several sets of moves.
+    pub moves: bool,
 }
 
 impl SourceControls {
@@ -125,7 +127,30 @@ impl SourceControls {
         style: true,
         key_route: true,
         beat_accent: true,
+        moves: true,
     };
+}
+
+/// When a switch of moves takes effect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MovesSwitch {
+    /// At the next beat.
+    NextBeat,
+    /// At the next bar's first beat.
+    NextBar,
+}
+
+/// Which set of moves a source dances, of how many.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MovesReport {
+    /// The set danced (index in the order the source was given them).
+    pub active: usize,
+    /// Sets it holds.
+    pub count: usize,
+    /// A switch asked for and not yet made: the set it will go to.
+    pub pending: Option<usize>,
+    /// Switches made since the last reset.
+    pub switches: u64,
 }
 
 /// What a source reports of its last frame, for the stats, the status line and the view.
@@ -139,6 +164,8 @@ pub struct SourceReport {
     pub safety: Option<crate::neural::safety::SafetyCounts>,
     /// What the stage did since the last reset (`None`: not on a stage).
     pub stage: Option<crate::stage::StageCounts>,
+    /// Which of its sets of moves it dances (`None`: it has one).
+    pub moves: Option<MovesReport>,
 }
 
 /// Where the stage would have the dancer travel, in the source's own floor frame.
@@ -190,6 +217,12 @@ pub trait MotionSource {
     /// Hears where the stage would have the dance travel from now on (`None`: anywhere). A
     /// source that chooses its steps may prefer those going that way; the others ignore it.
     fn prefer_travel(&mut self, _preference: Option<TravelPreference>) {}
+
+    /// Switches to its set of moves `index` at `at`, gliding from the move it is in; false
+    /// (and nothing changes) if it has no such set. Never allocates.
+    fn select_moves(&mut self, _index: usize, _at: MovesSwitch) -> bool {
+        false
+    }
 }
 
 /// A boxed source is a source (so a stage can hold whichever the daemon opened).
@@ -228,6 +261,10 @@ impl<S: MotionSource + ?Sized> MotionSource for Box<S> {
 
     fn prefer_travel(&mut self, preference: Option<TravelPreference>) {
         (**self).prefer_travel(preference)
+    }
+
+    fn select_moves(&mut self, index: usize, at: MovesSwitch) -> bool {
+        (**self).select_moves(index, at)
     }
 }
 

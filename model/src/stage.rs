@@ -585,6 +585,10 @@ impl<S: MotionSource> MotionSource for StagedSource<S> {
     fn prefer_travel(&mut self, preference: Option<TravelPreference>) {
         self.source.prefer_travel(preference);
     }
+
+    fn select_moves(&mut self, index: usize, at: crate::source::MovesSwitch) -> bool {
+        self.source.select_moves(index, at)
+    }
 }
 
 #[cfg(test)]

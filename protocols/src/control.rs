@@ -122,6 +122,15 @@ pub enum ControlEvent {
     Resume,
     /// The tempo the music is known to have, BPM in [30, 300].
     TempoHint(f32),
+    /// Dance another set of moves (a clip library the dancer holds): its name, or its number
+    /// from 0 in the order they were given (as decimal digits); resolved and counted by the
+    /// receiver.
+    Moves {
+        /// Name or number.
+        choice: String,
+        /// When the switch lands (on a beat, or a bar's first beat).
+        quantize: Quantize,
+    },
 }
 
 /// Parses OSC control packets into [`ControlEvent`]s, counting what it could not use.
@@ -264,6 +273,31 @@ impl ControlParser {
                 }
             }
             "/style" => ControlEvent::DanceStyle(name_or_number(args, &STYLE_NUMBERS)?),
+            "/moves" => {
+                let choice = match args.first() {
+                    Some(OscType::String(s)) if !s.trim().is_empty() => s.trim().to_string(),
+                    Some(a) => {
+                        let n = as_int(a)?;
+                        if n < 0 {
+                            return Err(Reject::BadArguments);
+                        }
+                        n.to_string()
+                    }
+                    None => return Err(Reject::BadArguments),
+                };
+                let quantize = match args.get(1) {
+                    None => Quantize::NextBar,
+                    Some(OscType::String(s)) => match Quantize::parse(s) {
+                        Some(q @ (Quantize::NextBeat | Quantize::NextBar)) => q,
+                        _ => return Err(Reject::BadArguments),
+                    },
+                    Some(_) => return Err(Reject::BadArguments),
+                };
+                if args.len() > 2 {
+                    return Err(Reject::BadArguments);
+                }
+                ControlEvent::Moves { choice, quantize }
+            }
             "/keypose/route" => {
                 ControlEvent::KeyPoseRoute(name_or_number(args, &KEY_ROUTE_NUMBERS)?)
             }
@@ -563,6 +597,20 @@ mod tests {
                 msg("/danced/control/tempo", vec![OscType::Int(90)]),
                 ControlEvent::TempoHint(90.0),
             ),
+            (
+                msg("/danced/control/moves", vec![s(" Salsa ")]),
+                ControlEvent::Moves {
+                    choice: "Salsa".into(),
+                    quantize: Quantize::NextBar,
+                },
+            ),
+            (
+                msg("/danced/control/moves", vec![OscType::Int(2), s("beat")]),
+                ControlEvent::Moves {
+                    choice: "2".into(),
+                    quantize: Quantize::NextBeat,
+                },
+            ),
         ];
         let n = cases.len() as u64;
         for (bytes, want) in cases {
@@ -624,6 +672,10 @@ mod tests {
             msg("/danced/control/transition", vec![OscType::Float(-1.0)]),
             msg("/danced/control/style", vec![]),
             msg("/danced/control/style", vec![OscType::Int(5)]),
+            msg("/danced/control/moves", vec![]),
+            msg("/danced/control/moves", vec![OscType::Int(-1)]),
+            msg("/danced/control/moves", vec![s("a"), s("now")]),
+            msg("/danced/control/moves", vec![s("a"), s("bar"), s("x")]),
             msg("/danced/control/style", vec![s(" ")]),
             msg("/danced/control/keypose/route", vec![]),
             msg("/danced/control/keypose/route", vec![OscType::Int(2)]),

@@ -48,6 +48,20 @@ pub struct NoteRule {
     pub channel: Option<u8>,
 }
 
+/// One note → set of moves rule as written in the file (`[[moves]]`).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MovesRule {
+    /// MIDI note number 0..=127.
+    pub note: u8,
+    /// The set of moves' name, or its number from 0 (as text).
+    pub moves: String,
+    /// When the switch lands: `beat` or `bar` (the default).
+    pub quantize: Option<Quantize>,
+    /// Channel 1..=16 this rule listens to; the map's `channel` when absent.
+    pub channel: Option<u8>,
+}
+
 /// One controller → parameter rule as written in the file.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -90,6 +104,9 @@ pub struct MidiMapConfig {
     /// Note rules.
     #[serde(default, rename = "note")]
     pub notes: Vec<NoteRule>,
+    /// Note → set of moves rules.
+    #[serde(default)]
+    pub moves: Vec<MovesRule>,
     /// Controller rules.
     #[serde(default, rename = "cc")]
     pub ccs: Vec<CcRule>,
@@ -171,6 +188,15 @@ impl MidiMap {
                         quantize: rule.quantize.unwrap_or(self.config.default_quantize),
                     });
                     self.held = Some((channel, note));
+                } else if let Some(rule) =
+                    self.config.moves.iter().find(|r| {
+                        r.note == note && listens(r.channel, self.config.channel, channel)
+                    })
+                {
+                    out.push(ControlEvent::Moves {
+                        choice: rule.moves.trim().to_string(),
+                        quantize: rule.quantize.unwrap_or(Quantize::NextBar),
+                    });
                 }
             }
             MidiMessage::NoteOff { channel, note, .. }
@@ -304,6 +330,26 @@ fn validate(c: &MidiMapConfig) -> Result<(), String> {
             return Err(format!("{what}: note mapped twice on the same channel"));
         }
     }
+    for (i, r) in c.moves.iter().enumerate() {
+        let what = format!("moves rule {} (note {})", i + 1, r.note);
+        if r.note > 127 {
+            return Err(format!("{what}: note is not in 0..=127"));
+        }
+        if r.moves.trim().is_empty() {
+            return Err(format!("{what}: the moves' name is empty"));
+        }
+        if matches!(r.quantize, Some(Quantize::Now | Quantize::InBeats(_))) {
+            return Err(format!("{what}: quantize is \"beat\" or \"bar\""));
+        }
+        channel_ok(r.channel, &what)?;
+        let ch = r.channel.or(c.channel);
+        let same = |note: u8, channel: Option<u8>| note == r.note && channel.or(c.channel) == ch;
+        if c.notes.iter().any(|o| same(o.note, o.channel))
+            || c.moves[..i].iter().any(|o| same(o.note, o.channel))
+        {
+            return Err(format!("{what}: note mapped twice on the same channel"));
+        }
+    }
     for (i, r) in c.ccs.iter().enumerate() {
         let what = format!("cc rule {} (controller {})", i + 1, r.controller);
         if r.controller > 127 {
@@ -364,6 +410,41 @@ mod tests {
         ControlEvent::KeyPose {
             name: name.into(),
             quantize,
+        }
+    }
+
+    #[test]
+    fn notes_switch_the_sets_of_moves() {
+        let mut m = MidiMap::from_toml_str(
+            "[[moves]]\nnote = 48\nmoves = \"salsa\"\n[[moves]]\nnote = 49\nmoves = \"1\"\nquantize = \"beat\"\n",
+        )
+        .unwrap();
+        let on = |note| MidiMessage::NoteOn {
+            channel: 1,
+            note,
+            velocity: 90,
+        };
+        assert_eq!(
+            map(&mut m, on(48)),
+            vec![ControlEvent::Moves {
+                choice: "salsa".into(),
+                quantize: Quantize::NextBar
+            }]
+        );
+        assert_eq!(
+            map(&mut m, on(49)),
+            vec![ControlEvent::Moves {
+                choice: "1".into(),
+                quantize: Quantize::NextBeat
+            }]
+        );
+        assert!(map(&mut m, on(50)).is_empty());
+        for bad in [
+            "[[moves]]\nnote = 48\nmoves = \" \"\n",
+            "[[moves]]\nnote = 48\nmoves = \"a\"\nquantize = \"now\"\n",
+            "[[note]]\nnote = 48\npose = \"x\"\n[[moves]]\nnote = 48\nmoves = \"a\"\n",
+        ] {
+            assert!(MidiMap::from_toml_str(bad).is_err(), "{bad}");
         }
     }
 

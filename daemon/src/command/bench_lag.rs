@@ -264,10 +264,10 @@ fn source_settings(kind: SourceKind, config: &Config) -> SourceSettings<'_> {
         } else {
             None
         },
-        library: if kind == SourceKind::Retrieval {
-            config.dancer.library.as_deref()
+        libraries: if kind == SourceKind::Retrieval {
+            &config.dancer.libraries
         } else {
-            None
+            &[]
         },
         beat_accent: Some(config.dancer.beat_accent),
         foot_plant: Some(config.dancer.foot_plant),

@@ -124,7 +124,7 @@ pub fn generate(args: &GenerateArgs) -> Result<()> {
     }
     let settings = SourceSettings {
         model: config.dancer.model.as_deref(),
-        library: config.dancer.library.as_deref(),
+        libraries: &config.dancer.libraries,
         beat_accent: Some(config.dancer.beat_accent),
         foot_plant: Some(config.dancer.foot_plant),
         network_only: *network_only,

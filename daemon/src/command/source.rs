@@ -14,9 +14,10 @@ pub struct SourceArgs {
     /// Neural model file (default: the built-in configs/models/default.dnn).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Clip library file of the retrieval source (default: the built-in one).
+    /// Clip library file of the retrieval source (default: the built-in one); repeat it to
+    /// hold several, switched live by /danced/control/moves (the first dances first).
     #[arg(long)]
-    pub library: Option<PathBuf>,
+    pub library: Vec<PathBuf>,
     /// Depth of the neural dancer's beat accent, 0–0.9 (0: the network's own timing).
     #[arg(long)]
     pub beat_accent: Option<f32>,
@@ -77,9 +78,9 @@ impl SourceArgs {
     /// Applies the flags to `config`; a model file implies the neural source and a library
     /// the retrieval source unless a source is named.
     pub fn apply(&self, config: &mut Config) {
-        let implied = match (&self.model, &self.library) {
-            (Some(_), None) => Some(SourceKind::Neural),
-            (None, Some(_)) => Some(SourceKind::Retrieval),
+        let implied = match (&self.model, self.library.is_empty()) {
+            (Some(_), true) => Some(SourceKind::Neural),
+            (None, false) => Some(SourceKind::Retrieval),
             _ => None,
         };
         if let Some(k) = self.source.or(implied) {
@@ -87,7 +88,7 @@ impl SourceArgs {
             if self.source.is_some() || implied.is_some() {
                 // Files of the other source from the configuration no longer apply.
                 match k {
-                    SourceKind::Neural => config.dancer.library = None,
+                    SourceKind::Neural => config.dancer.libraries.clear(),
                     SourceKind::Retrieval => config.dancer.model = None,
                 }
             }
@@ -95,8 +96,12 @@ impl SourceArgs {
         if self.model.is_some() {
             config.dancer.model = self.model.clone();
         }
-        if self.library.is_some() {
-            config.dancer.library = self.library.clone();
+        if !self.library.is_empty() {
+            config.dancer.libraries = self
+                .library
+                .iter()
+                .map(crate::dancer::LibraryChoice::file)
+                .collect();
         }
         if let Some(a) = self.beat_accent {
             config.dancer.beat_accent = a;

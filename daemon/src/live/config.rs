@@ -285,8 +285,9 @@ pub struct DancerConfig {
     pub source: String,
     /// Neural model file (default: the built-in one).
     pub model: Option<PathBuf>,
-    /// Clip library file of the retrieval source (default: the built-in one).
-    pub library: Option<PathBuf>,
+    /// Clip libraries of the retrieval source, switched live by `/danced/control/moves`
+    /// (default: the built-in one).
+    pub libraries: Vec<crate::dancer::LibraryChoice>,
     /// Initial temperature (0 = most likely motion).
     pub temperature: f32,
     /// Random seed.
@@ -311,7 +312,7 @@ impl Default for DancerConfig {
         Self {
             source: crate::dancer::SourceKind::DEFAULT.name().into(),
             model: None,
-            library: None,
+            libraries: Vec::new(),
             temperature: 0.5,
             seed: 1,
             transition_beats: 1.0,
@@ -499,9 +500,9 @@ impl Config {
                     ),
                 ));
             }
-            Some(crate::dancer::SourceKind::Neural) if self.dancer.library.is_some() => {
+            Some(crate::dancer::SourceKind::Neural) if !self.dancer.libraries.is_empty() => {
                 return Err(bad(
-                    "dancer.library",
+                    "dancer.libraries",
                     "is for the retrieval source; dancer.source is \"neural\"".into(),
                 ));
             }

@@ -23,7 +23,7 @@ use protocols::control::{
 use super::sink::PoseBank;
 use super::stats::Stats;
 use super::wire::{ControlEvent, Quantize};
-use model::source::{KeyPoseRoute, SourceControls};
+use model::source::{KeyPoseRoute, MovesSwitch, SourceControls};
 use model::style::{DanceStyle, StyleRequest};
 
 /// Events one input may queue before the motion thread takes them.
@@ -50,6 +50,13 @@ pub enum MotionCommand {
     DanceStyle(StyleRequest),
     /// New route for key poses.
     KeyPoseRoute(KeyPoseRoute),
+    /// Dance the set of moves at this index, from the next beat or bar.
+    Moves {
+        /// Index in the order the dancer was given its sets.
+        index: u16,
+        /// When.
+        at: MovesSwitch,
+    },
     /// Reach the key pose at this index of the pose table.
     KeyPose {
         /// Index in [`ControlHub::table`]'s order.
@@ -98,7 +105,12 @@ struct Params {
     style: ParamSlot,
     /// The [`KeyPoseRoute`]'s index.
     key_route: ParamSlot,
+    /// The set of moves' index, plus 1 << 32 for a switch on the next bar.
+    moves: ParamSlot,
 }
+
+/// Bit of the moves slot saying the switch waits for the next bar.
+const MOVES_AT_BAR: u64 = 1 << 32;
 
 fn style_bits(request: StyleRequest) -> u64 {
     match request {
@@ -122,6 +134,7 @@ pub struct ControlHub {
     honoured: SourceControls,
     params: Arc<Params>,
     names: Arc<HashMap<String, u16>>,
+    moves: Arc<Vec<String>>,
     table: Vec<[Quat; JOINT_COUNT]>,
     consumers: Vec<rtrb::Consumer<MotionCommand>>,
     stats: Arc<Stats>,
@@ -144,6 +157,7 @@ impl ControlHub {
             honoured: SourceControls::ALL,
             params: Arc::new(Params::default()),
             names: Arc::new(names),
+            moves: Arc::new(Vec::new()),
             table,
             consumers: Vec::new(),
             stats,
@@ -157,16 +171,23 @@ impl ControlHub {
         self
     }
 
+    /// Resolves `/moves` names against `names` (the dancer's sets of moves, in order).
+    pub fn with_moves(mut self, names: Vec<String>) -> Self {
+        self.moves = Arc::new(names);
+        self
+    }
+
     /// A sender for one more input (each input thread owns its own).
     pub fn sender(&mut self) -> ControlSender {
         let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
         self.consumers.push(consumer);
         ControlSender {
             honoured: self.honoured,
-            warned: [false; 3],
+            warned: [false; 4],
             producer,
             params: self.params.clone(),
             names: self.names.clone(),
+            moves: self.moves.clone(),
             stats: self.stats.clone(),
             buckets: [TokenBucket::new(); 3],
         }
@@ -233,6 +254,8 @@ impl TokenBucket {
 pub enum ControlRefusal {
     /// No key pose of that name.
     UnknownPose(String),
+    /// No set of moves of that name or number.
+    UnknownMoves(String),
     /// A value outside its parameter's range, or not finite.
     OutOfRange,
     /// More events to this address than the rate limit allows.
@@ -253,6 +276,8 @@ pub enum UnsupportedControl {
     KeyRoute,
     /// `/danced/control/accent`.
     BeatAccent,
+    /// `/danced/control/moves`.
+    Moves,
 }
 
 impl UnsupportedControl {
@@ -268,6 +293,9 @@ impl UnsupportedControl {
             UnsupportedControl::BeatAccent => {
                 "/danced/control/accent refused: the loaded dancer follows the beat by itself and has no beat accent"
             }
+            UnsupportedControl::Moves => {
+                "/danced/control/moves refused: the loaded dancer has one set of moves (give the retrieval dancer several --library files)"
+            }
         }
     }
 }
@@ -276,10 +304,12 @@ impl UnsupportedControl {
 pub struct ControlSender {
     honoured: SourceControls,
     /// Whether each [`UnsupportedControl`] has been explained in the log yet.
-    warned: [bool; 3],
+    warned: [bool; 4],
     producer: rtrb::Producer<MotionCommand>,
     params: Arc<Params>,
     names: Arc<HashMap<String, u16>>,
+    /// The dancer's sets of moves, by name, in order.
+    moves: Arc<Vec<String>>,
     stats: Arc<Stats>,
     /// Key pose, clear, pause/resume.
     buckets: [TokenBucket; 3],
@@ -304,9 +334,11 @@ impl ControlSender {
         let s = &self.stats;
         let counter = match &r {
             Ok(()) => &s.controls_accepted,
-            Err(ControlRefusal::UnknownPose(_) | ControlRefusal::OutOfRange) => {
-                &s.controls_rejected
-            }
+            Err(
+                ControlRefusal::UnknownPose(_)
+                | ControlRefusal::UnknownMoves(_)
+                | ControlRefusal::OutOfRange,
+            ) => &s.controls_rejected,
             Err(ControlRefusal::RateLimited) => &s.controls_rate_limited,
             Err(ControlRefusal::QueueFull) => &s.controls_dropped,
             Err(ControlRefusal::Unsupported(_)) => &s.controls_unsupported,
@@ -376,6 +408,27 @@ impl ControlSender {
                 self.offer(&p.key_route, route.index() as u64);
                 return Ok(());
             }
+            ControlEvent::Moves { choice, quantize } => {
+                supported(honoured.moves, UnsupportedControl::Moves)?;
+                let index = self
+                    .moves
+                    .iter()
+                    .position(|n| n.eq_ignore_ascii_case(&choice))
+                    .or_else(|| {
+                        choice
+                            .parse::<usize>()
+                            .ok()
+                            .filter(|&i| i < self.moves.len())
+                    })
+                    .ok_or(ControlRefusal::UnknownMoves(choice))?;
+                let at = if quantize == Quantize::NextBeat {
+                    0
+                } else {
+                    MOVES_AT_BAR
+                };
+                self.offer(&p.moves, index as u64 | at);
+                return Ok(());
+            }
             ControlEvent::KeyPose { name, quantize } => {
                 let Some(&pose) = self.names.get(&name) else {
                     return Err(ControlRefusal::UnknownPose(name));
@@ -428,6 +481,16 @@ impl ControlReceiver {
         if let Some(bits) = p.key_route.take() {
             let route = KeyPoseRoute::from_index(bits as usize).unwrap_or(KeyPoseRoute::Overlay);
             apply(MotionCommand::KeyPoseRoute(route));
+        }
+        if let Some(bits) = p.moves.take() {
+            apply(MotionCommand::Moves {
+                index: (bits & 0xffff) as u16,
+                at: if bits & MOVES_AT_BAR != 0 {
+                    MovesSwitch::NextBar
+                } else {
+                    MovesSwitch::NextBeat
+                },
+            });
         }
         for c in &mut self.consumers {
             while let Ok(command) = c.pop() {
@@ -543,6 +606,56 @@ mod tests {
             );
         }
         assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 8);
+    }
+
+    #[test]
+    fn a_set_of_moves_by_name_or_number_reaches_the_motion_thread_newest_first() {
+        let stats = Arc::new(Stats::new());
+        let mut three = ControlHub::new(&MemoryPoseBank::builtin(), stats.clone())
+            .with_moves(vec!["tang2018".into(), "Salsa".into(), "breaking".into()]);
+        let mut tx = three.sender();
+        let (mut rx, _) = three.into_receiver();
+        let moves = |choice: &str, quantize| ControlEvent::Moves {
+            choice: choice.into(),
+            quantize,
+        };
+        tx.send(moves("salsa", Quantize::NextBar)).unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![MotionCommand::Moves {
+                index: 1,
+                at: MovesSwitch::NextBar
+            }]
+        );
+        // The newest choice wins; the one it replaced is counted.
+        tx.send(moves("1", Quantize::NextBar)).unwrap();
+        tx.send(moves("2", Quantize::NextBeat)).unwrap();
+        assert_eq!(
+            drain(&mut rx),
+            vec![MotionCommand::Moves {
+                index: 2,
+                at: MovesSwitch::NextBeat
+            }]
+        );
+        assert_eq!(stats.controls_coalesced.load(Ordering::Relaxed), 1);
+        for unknown in ["3", "polka"] {
+            assert_eq!(
+                tx.send(moves(unknown, Quantize::NextBar)),
+                Err(ControlRefusal::UnknownMoves(unknown.into()))
+            );
+        }
+        assert_eq!(stats.controls_rejected.load(Ordering::Relaxed), 2);
+        assert!(drain(&mut rx).is_empty());
+
+        // A dancer with one set of moves refuses the control, counted.
+        let (one, stats) = hub();
+        let mut one = one.honouring(SourceControls::default());
+        let mut tx = one.sender();
+        assert_eq!(
+            tx.send(moves("0", Quantize::NextBar)),
+            Err(ControlRefusal::Unsupported(UnsupportedControl::Moves))
+        );
+        assert_eq!(stats.controls_unsupported.load(Ordering::Relaxed), 1);
     }
 
     #[test]

@@ -225,6 +225,10 @@ pub fn run(
         if let Some(c) = report.stage {
             stats.stage.store(&c);
         }
+        if let Some(m) = report.moves {
+            stats.moves.store(1 + m.active as u32, Ordering::Relaxed);
+            stats.moves_switches.store(m.switches, Ordering::Relaxed);
+        }
         next_time = t + 1.0 / rate;
         window.remove(0);
         times.remove(0);
@@ -262,6 +266,10 @@ fn apply(
         MotionCommand::Pause => st.paused = true,
         MotionCommand::Resume => st.paused = false,
         MotionCommand::TempoHint(bpm) => st.tempo_hint = bpm,
+        MotionCommand::Moves { index, at } => {
+            // The control path only passes on sets the dancer holds.
+            source.select_moves(usize::from(index), at);
+        }
     }
 }
 

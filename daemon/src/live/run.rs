@@ -90,7 +90,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         &crate::dancer::SourceSettings {
             network_only: false,
             model: config.dancer.model.as_deref(),
-            library: config.dancer.library.as_deref(),
+            libraries: &config.dancer.libraries,
             // Live, the accent travels with the controls (set from the configuration at start).
             beat_accent: None,
             foot_plant: Some(config.dancer.foot_plant),
@@ -106,7 +106,18 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     };
     let osc = OscSink::from_config(config)?;
     let targets = osc.describe();
-    let mut hub = ControlHub::new(&poses, ctx.stats.clone()).honouring(source.controls());
+    let moves: Vec<String> = if kind == crate::dancer::SourceKind::Retrieval {
+        crate::dancer::load_libraries(&config.dancer.libraries)?
+            .into_iter()
+            .map(|(name, _)| name)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let _ = ctx.stats.moves_names.set(moves.clone());
+    let mut hub = ControlHub::new(&poses, ctx.stats.clone())
+        .honouring(source.controls())
+        .with_moves(moves.clone());
     let controls = ControlInputs::start(config, &mut hub, ctx.stop.clone())?;
     let mut sink: Box<dyn FrameSink> = Box::new(osc);
     let view = if config.view.enabled {
@@ -119,6 +130,11 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             lead_ms: config.output.lead_ms,
             controls: source.controls(),
             stage: Some(config.stage.settings().sanitized()),
+            moves: if source.controls().moves {
+                moves.clone()
+            } else {
+                Vec::new()
+            },
             ..ViewHello::default()
         };
         let feed = LiveFeed {
@@ -261,7 +277,7 @@ pub fn summary(r: &StatsReport) -> String {
          queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
          packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
          controls     {} applied, {} rejected, {} not honoured by the dancer, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
-         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}{}{}",
+         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}{}{}{}",
         r.wall_s,
         r.frames_sent,
         r.frames_sent as f64 / r.wall_s.max(1e-9),
@@ -334,6 +350,10 @@ pub fn summary(r: &StatsReport) -> String {
                 "\nstage        of {} frames {} steered, {} glided back, {} clamped; turning at most {:.0}°/s",
                 c.frames, c.steered, c.glided, c.clamped, c.max_turn_deg_per_s
             ))
+            .unwrap_or_default(),
+        r.moves
+            .as_ref()
+            .map(|m| format!("\nmoves        {m} at the end, {} switches", r.moves_switches))
             .unwrap_or_default(),
         r.view
             .map(|v| view_summary(&v, r.wall_s))

@@ -248,6 +248,12 @@ pub struct Stats {
     pub safety: SafetyGauges,
     /// What the stage did.
     pub stage: StageGauges,
+    /// The names of the dancer's sets of moves, set once before the run (empty: it has one).
+    pub moves_names: std::sync::OnceLock<Vec<String>>,
+    /// The set of moves danced: 0 = the source has one, 1 + its index.
+    pub moves: AtomicU32,
+    /// Switches of the set of moves made.
+    pub moves_switches: AtomicU64,
     rss: Mutex<Vec<(f64, u64)>>,
 }
 
@@ -303,6 +309,9 @@ impl Stats {
             key_pose_index: AtomicU32::new(0),
             safety: SafetyGauges::default(),
             stage: StageGauges::default(),
+            moves_names: std::sync::OnceLock::new(),
+            moves: AtomicU32::new(0),
+            moves_switches: AtomicU64::new(0),
             paused: AtomicU32::new(0),
             style: AtomicU32::new(0),
             style_auto: AtomicU32::new(1),
@@ -357,6 +366,15 @@ impl Stats {
         let v = self.style.load(Ordering::Relaxed);
         v.checked_sub(1)
             .and_then(|i| model::style::DanceStyle::from_index(i as usize))
+    }
+
+    /// The name of the set of moves danced, if the dancer holds several.
+    pub fn moves_danced(&self) -> Option<&str> {
+        let i = self.moves.load(Ordering::Relaxed).checked_sub(1)?;
+        self.moves_names
+            .get()
+            .and_then(|n| n.get(i as usize))
+            .map(String::as_str)
     }
 
     /// The summary of a run lasting `wall_s` that used `cpu_s` of process CPU time.
@@ -435,6 +453,8 @@ impl Stats {
             midi_queue_full: 0,
             safety_nets: self.safety.load(),
             stage: self.stage.load(),
+            moves: self.moves_danced().map(str::to_owned),
+            moves_switches: load(&self.moves_switches),
             style: self.style_danced().map(|s| s.name()),
             key_route: self.key_route().map(|r| r.name()),
             view: None,
@@ -651,6 +671,11 @@ pub struct StatsReport {
     /// What the stage did: frames steered back from the edge and clamped at it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stage: Option<StageCounts>,
+    /// The set of moves danced at the end (a dancer holding several only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub moves: Option<String>,
+    /// Switches of the set of moves made.
+    pub moves_switches: u64,
     /// The style danced at the end (sources with a style input only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub style: Option<&'static str>,

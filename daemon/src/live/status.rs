@@ -32,8 +32,12 @@ pub fn status_line(stats: &Stats) -> String {
         None => "–".to_string(),
     };
     let route = stats.key_route().map_or("–", |r| r.name());
+    let moves = stats
+        .moves_danced()
+        .map(|m| format!(" | moves {m}"))
+        .unwrap_or_default();
     format!(
-        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | style {style} | key pose {key} ({route}) | drops {} | packets {}{paused}",
+        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | style {style}{moves} | key pose {key} ({route}) | drops {} | packets {}{paused}",
         stats.tempo_bpm.get(),
         stats.beat_phase.get(),
         stats.latency.quantile_ms(0.99),

@@ -31,6 +31,8 @@ pub struct ViewHello {
     pub controls: model::source::SourceControls,
     /// The stage the dancer is kept on (`None`: a dance file, shown wherever it goes).
     pub stage: Option<model::stage::StageSettings>,
+    /// The dancer's sets of moves the page offers a selector for (empty: it has one).
+    pub moves: Vec<String>,
 }
 
 /// The run as the HUD shows it.
@@ -56,6 +58,8 @@ pub struct ViewStatus {
     pub key_pose_name: Option<String>,
     /// Model frames until the pending key pose.
     pub key_pose_frames_to_go: u32,
+    /// The set of moves danced (None: a dancer with one).
+    pub moves: Option<String>,
     /// Whether the dancer is paused.
     pub paused: bool,
     /// Added latency p99 of the sender, ms.
@@ -93,6 +97,7 @@ impl ViewStatus {
                 .then(|| poses.get(key_index).cloned())
                 .flatten(),
             key_pose_frames_to_go: stats.key_pose_frames_to_go.load(Ordering::Relaxed),
+            moves: stats.moves_danced().map(str::to_owned),
             paused: stats.paused.load(Ordering::Relaxed) == 1,
             latency_p99_ms: stats.latency.quantile_ms(0.99),
             frames_sent: stats.frames_sent.load(Ordering::Relaxed),

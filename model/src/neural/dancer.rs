@@ -556,6 +556,7 @@ impl MotionSource for NeuralDancer {
             style: self.has_style_input(),
             key_route: true,
             beat_accent: true,
+            moves: false,
         }
     }
 
@@ -565,6 +566,7 @@ impl MotionSource for NeuralDancer {
             key_route: Some(self.route_now),
             safety: Some(self.counts),
             stage: None,
+            moves: None,
         }
     }
 
