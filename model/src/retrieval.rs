@@ -57,6 +57,9 @@ const W_VELOCITY: f32 = 2.0;
 /// travel earns nothing: rewarded, it picked the clips that travel most, a capture's glitches
 /// among them (FID_k 76 against 38 on one eval seed).
 const W_STAGE: f32 = 6.0;
+/// Most beats a switch of moves cued for the next bar waits for the bar's first beat (a bar of
+/// 7 and the beat it was cued in); past them it lands on the next beat.
+const MAX_BEATS_TO_BAR: u32 = 8;
 /// Duration of the offset decay at a clip switch, seconds.
 const BLEND_SECONDS: f32 = 0.25;
 /// Smoothing factor of the live energy (per frame, ≈ 0.4 s time constant at 25 fps).
@@ -326,6 +329,8 @@ pub struct RetrievalDancer {
     pending: Option<(usize, MovesSwitch)>,
     /// Library switches made since the last reset.
     switches: u64,
+    /// Beats passed since the pending switch was asked for.
+    beats_waited: u32,
     /// Randomness for temperature sampling.
     rng: Rng,
     /// Whether a clip has been chosen since the last reset.
@@ -401,6 +406,7 @@ impl RetrievalDancer {
             active: 0,
             pending: None,
             switches: 0,
+            beats_waited: 0,
             rng: Rng::new(seed),
             started: false,
             clip: 0,
@@ -442,15 +448,17 @@ impl RetrievalDancer {
         &self.libraries[self.active]
     }
 
-    /// Makes a pending library switch due at this beat (`bar_phase`: the live bar phase at
-    /// the wrap) the active one; whether it did.
+    /// Makes a pending library switch due at this beat the active one; whether it did.
     fn take_due_switch(&mut self) -> bool {
         let Some((index, at)) = self.pending else {
             return false;
         };
-        // On a bar's first beat the bar phase has just wrapped too: within a beat of 0.
-        let on_bar = self.bar_phase < 0.15 || self.bar_phase > 0.95;
-        if at == MovesSwitch::NextBar && !on_bar {
+        // The clips are timed a little ahead of the heard beat, so on a bar's first beat the
+        // heard bar phase is just short of 1 (or just past 0): within half a beat of a 4/4 bar.
+        let on_bar = circular_distance(self.bar_phase, 0.0) < 0.125;
+        self.beats_waited = self.beats_waited.saturating_add(1);
+        // A bar tracker that has lost the bar must not hold the switch back for long.
+        if at == MovesSwitch::NextBar && !on_bar && self.beats_waited <= MAX_BEATS_TO_BAR {
             return false;
         }
         self.pending = None;
@@ -807,6 +815,7 @@ impl MotionSource for RetrievalDancer {
             return false;
         }
         self.pending = Some((index, at));
+        self.beats_waited = 0;
         true
     }
 }

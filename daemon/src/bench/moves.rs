@@ -155,3 +155,58 @@ pub fn moves_table(rows: &[MovesRow]) -> String {
     }
     out
 }
+
+/// One live switch of moves, danced.
+#[derive(Clone, Copy, Debug)]
+pub struct SwitchScore {
+    /// Seconds from the song's beat (or bar's first beat) nearest the frame the new moves
+    /// started to that frame (negative: ahead of it, as the dancer times its moves ahead of
+    /// the heard beat).
+    pub landing_s: f64,
+    /// Which beat (or bar) after the cue that was: 1 the next, 2 the one after (a cue within
+    /// the dancer's anticipation of the next), …
+    pub beats_after_cue: usize,
+    /// Whether it was cued for the next bar (else the next beat).
+    pub on_bar: bool,
+    /// Largest root step over the frames around the switch, metres per model frame.
+    pub root_step_m: f64,
+    /// The same per 60 Hz frame as sent (the sender interpolates between model frames).
+    pub root_step_60_m: f64,
+    /// Largest joint step there, metres per model frame.
+    pub joint_step_m: f64,
+}
+
+/// The switch table: how many, when they landed, how far the root and joints moved.
+pub fn switch_table(switches: &[SwitchScore], normal: (f64, f64)) -> String {
+    let (normal_root, normal_joint) = normal;
+    let mut out = String::from(
+        "| switches cued on | switches | within 70 ms of a beat (bar) | on the first / second / a later one after the cue | landing: median / largest distance from it | root step at the switch: median / largest, per 25 fps model frame | largest root step per 60 Hz frame sent: at a switch / while dancing | largest joint step per model frame: at a switch / while dancing |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for (label, on_bar) in [("the next bar", true), ("the next beat", false)] {
+        let of: Vec<&SwitchScore> = switches.iter().filter(|s| s.on_bar == on_bar).collect();
+        if of.is_empty() {
+            continue;
+        }
+        let mut landing: Vec<f64> = of.iter().map(|s| s.landing_s.abs() * 1000.0).collect();
+        landing.sort_by(f64::total_cmp);
+        let mut steps: Vec<f64> = of.iter().map(|s| s.root_step_m).collect();
+        steps.sort_by(f64::total_cmp);
+        let joints = of.iter().map(|s| s.joint_step_m).fold(0.0, f64::max);
+        let sent = of.iter().map(|s| s.root_step_60_m).fold(0.0, f64::max);
+        let within = of.iter().filter(|s| s.landing_s.abs() <= 0.07).count();
+        let nth = |n: usize| of.iter().filter(|s| s.beats_after_cue == n).count();
+        let later = of.iter().filter(|s| s.beats_after_cue > 2).count();
+        out.push_str(&format!(
+            "| {label} | {} | {:.0} % | {} / {} / {later} | {:.0} / {:.0} ms | {:.3} / {:.3} m | {sent:.3} / {normal_root:.3} m | {joints:.3} / {normal_joint:.3} m |\n",
+            of.len(),
+            100.0 * within as f64 / of.len() as f64,
+            nth(1),
+            nth(2),
+            landing[landing.len() / 2],
+            landing[landing.len() - 1],
+            steps[steps.len() / 2],
+            steps[steps.len() - 1],
+        ));
+    }
+    out
+}
