@@ -101,6 +101,16 @@ fn controller(port: u16, stop: Arc<AtomicBool>) -> JoinHandle<u64> {
                 let _ = socket.send_to(b"not osc", to);
                 sent += 4;
             }
+            if i.is_multiple_of(30) {
+                // A switch of moves every 1.2 s, alternately on the next bar and beat.
+                let which = (i / 30) % 2;
+                let when = if which == 0 { "bar" } else { "beat" };
+                send(
+                    "moves",
+                    vec![OscType::Int(which as i32), OscType::String(when.into())],
+                );
+                sent += 1;
+            }
             if i.is_multiple_of(150) {
                 send("pause", vec![]);
                 send("resume", vec![]);
@@ -131,6 +141,17 @@ fn live_run(source: &'static str) -> JoinHandle<LiveRun> {
         config.control.osc_port = free_port();
         config.audio.duration = Some(RUN_S);
         config.dancer.source = source.into();
+        if source == "retrieval" {
+            // Two libraries, so the switches of moves run on the motion thread too.
+            let clips = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../configs/clips/tang2018-train.danclips");
+            config.dancer.libraries = ["first", "second"]
+                .map(|name| daemon::dancer::LibraryChoice {
+                    path: clips.clone(),
+                    name: Some(name.into()),
+                })
+                .to_vec();
+        }
         // The smallest stage, so its steering, glide and clamp all run on the motion thread.
         config.stage.radius_m = model::stage::MIN_RADIUS_M;
         // The browser view too: the sender hands it every frame and event.
@@ -228,6 +249,16 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
             ("neural", Some(c)) => assert!(c.frames as f64 > 20.0 * (r.wall_s - 1.0), "{c:?}"),
             ("retrieval", None) => {}
             (s, c) => panic!("{s}: safety nets {c:?}"),
+        }
+        // The retrieval dancer switched its moves; the neural one refused, counted.
+        match source {
+            "retrieval" => assert!(
+                r.moves_switches >= 5 && r.moves.is_some(),
+                "{:?} {}",
+                r.moves,
+                r.moves_switches
+            ),
+            _ => assert!(r.controls_unsupported > 0 && r.moves.is_none(), "{r:?}"),
         }
         // The stage placed every frame, and had to work at it.
         let stage = r.stage.expect("the stage reports");
