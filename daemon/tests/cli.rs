@@ -326,3 +326,99 @@ fn devices_and_a_missing_input_fail_cleanly() {
     assert!(!err.contains("panicked"), "{err}");
     assert!(err.contains("audio input"), "{err}");
 }
+
+/// Twenty seconds of the built-in dancer at 110 BPM as a BVH whose joints have names no table
+/// knows (`part_00` … `part_21`), in centimetres, its Y-up skeleton stood up in a Z-up world by
+/// its root (as AMASS's files are); returns the joint map it needs.
+fn unknown_rig_dance(path: &std::path::Path) -> String {
+    use model::source::MotionSource;
+    let (library, _) = daemon::dancer::load_library(None).unwrap();
+    let mut dancer = model::retrieval::RetrievalDancer::new(library, 1).unwrap();
+    let mut out = model::rig::Pose::rest();
+    let fps = model::retrieval::RETRIEVAL_FPS;
+    let poses: Vec<_> = (0..(20.0 * fps) as usize)
+        .map(|i| {
+            let beats = i as f64 / fps * 110.0 / 60.0;
+            let mut m = [0.0f32; dsp::feature::FEATURE_DIM];
+            use dsp::feature::FeatureLayout as L;
+            let b = (beats.fract() * std::f64::consts::TAU) as f32;
+            let bar = ((beats / 4.0).fract() * std::f64::consts::TAU) as f32;
+            (m[L::BEAT_SIN], m[L::BEAT_COS]) = (b.sin(), b.cos());
+            (m[L::BAR_SIN], m[L::BAR_COS]) = (bar.sin(), bar.cos());
+            m[L::TEMPO] = 110.0;
+            m[L::ENERGY] = -15.0;
+            dancer.step(&[m], &model::source::Controls::default(), &mut out);
+            // Z up, facing −Y: (x, y, z) → (x, −z, y).
+            let mut p = out;
+            let r = p.root_position;
+            p.root_position = glam::Vec3::new(r.x, -r.z, r.y);
+            p.local_rotations[0] =
+                glam::Quat::from_rotation_x(std::f32::consts::FRAC_PI_2) * p.local_rotations[0];
+            p
+        })
+        .collect();
+    let skeleton = model::rig::Skeleton::default_adult();
+    let mut bvh = model::bvh::export(&skeleton, &poses, fps);
+    let mut map = String::from("[joints]\n");
+    for (i, j) in bvh.joints.iter_mut().enumerate() {
+        let part = format!("part_{i:02}");
+        map.push_str(&format!("{part} = \"{}\"\n", j.name));
+        j.name = part;
+    }
+    bvh.write(path).unwrap();
+    map
+}
+
+#[test]
+fn a_folder_of_your_own_dances_becomes_a_library_and_unknown_joints_get_a_map() {
+    let dir = scratch("moves");
+    let folder = dir.join("my-moves");
+    std::fs::create_dir_all(&folder).unwrap();
+    let map = unknown_rig_dance(&folder.join("routine.bvh"));
+    let out = dir.join("mine.danclips");
+    // Joints it cannot name: a clear error naming them and how to write the map.
+    let failed = danced()
+        .args(["library", "build", "--bvh"])
+        .arg(&folder)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!failed.status.success());
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert!(
+        stderr.contains("no joint of the file drives Hips")
+            && stderr.contains("part_00")
+            && stderr.contains("--joint-map")
+            && stderr.contains("[joints]"),
+        "{stderr}"
+    );
+    // With the map, it reads: Z up and centimetres found, the beat found from the motion.
+    let map_file = dir.join("map.toml");
+    std::fs::write(&map_file, map).unwrap();
+    let (stdout, _) = succeed(
+        danced()
+            .args(["library", "build", "--bvh"])
+            .arg(&folder)
+            .arg("--out")
+            .arg(&out)
+            .arg("--joint-map")
+            .arg(&map_file),
+    );
+    let row = stdout
+        .lines()
+        .find(|l| l.starts_with("| routine |"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    let tempo: f64 = cells[3].parse().unwrap();
+    assert!((80.0..140.0).contains(&tempo), "{row}");
+    assert!(
+        row.contains("Z up, right-handed") && row.contains("| cm |"),
+        "{row}"
+    );
+    assert!(stdout.contains("library \"my-moves\""), "{stdout}");
+    let (library, meta) =
+        model::retrieval::ClipLibrary::from_bytes(&std::fs::read(&out).unwrap()).unwrap();
+    assert!(library.clips.len() > 20, "{} clips", library.clips.len());
+    assert!(meta.contains("\"name\": \"my-moves\""), "{meta}");
+}

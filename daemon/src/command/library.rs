@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 
 use offline::files::write_atomic;
@@ -136,13 +136,20 @@ fn build_from_moves(
         }
     }
     let (full, clips) = library(&dances);
-    anyhow::ensure!(
-        !full.clips.is_empty(),
-        "no dance in {} gave a clip ({} could not be read, {} had no beat the motion confirms)",
-        dir.display(),
-        failed.len(),
-        dances.len()
-    );
+    if full.clips.is_empty() {
+        let reasons: Vec<String> = failed.iter().map(|(_, e)| e.to_string()).collect();
+        bail!(
+            "no dance in {} gave a clip ({} could not be read, {} had no beat the motion confirms){}",
+            dir.display(),
+            failed.len(),
+            dances.len(),
+            if reasons.is_empty() {
+                String::new()
+            } else {
+                format!(":\n{}", reasons.join("\n"))
+            }
+        );
+    }
     let name = name.unwrap_or_else(|| {
         dir.file_name()
             .map(|n| n.to_string_lossy().into_owned())
