@@ -599,6 +599,29 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("dancer.model"), "{e}");
+        // Several libraries, as an inline array or as tables; names optional.
+        for text in [
+            "[dancer]\nsource = \"retrieval\"\nlibraries = [{ path = \"a.danclips\" }, { path = \"b.danclips\", name = \"breaking\" }]\n",
+            "[dancer]\nsource = \"retrieval\"\n[[dancer.libraries]]\npath = \"a.danclips\"\n[[dancer.libraries]]\npath = \"b.danclips\"\nname = \"breaking\"\n",
+        ] {
+            let c = Config::parse(text, Path::new("x.toml")).unwrap();
+            assert_eq!(
+                c.dancer.libraries,
+                vec![
+                    crate::dancer::LibraryChoice::file("a.danclips"),
+                    crate::dancer::LibraryChoice {
+                        path: "b.danclips".into(),
+                        name: Some("breaking".into())
+                    }
+                ]
+            );
+        }
+        let e = Config::parse(
+            "[dancer]\nsource = \"neural\"\nlibraries = [{ path = \"a.danclips\" }]\n",
+            Path::new("x.toml"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("dancer.libraries"), "{e}");
     }
 
     #[test]
