@@ -312,12 +312,11 @@ pub fn motion_beat_grid(track: &JointTrack<'_>) -> Result<MotionBeatGrid, ModelE
         .iter()
         .filter(|&&b| {
             let k = kinematic.partition_point(|&x| x < b);
-            let near = [k.checked_sub(1), Some(k)]
+            [k.checked_sub(1), Some(k)]
                 .into_iter()
                 .flatten()
                 .filter_map(|i| kinematic.get(i))
-                .any(|&x| (x - b).abs() <= MATCH_FRACTION * median);
-            near
+                .any(|&x| (x - b).abs() <= MATCH_FRACTION * median)
         })
         .count();
     let confidence = seen as f64 / beats_s.len() as f64;

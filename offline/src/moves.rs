@@ -215,13 +215,16 @@ pub fn bvh_files(dir: &Path) -> Result<Vec<PathBuf>, OfflineError> {
     Ok(files)
 }
 
+/// Each file of a folder and its dance, or why it could not be read.
+pub type MovesFolder = Vec<(PathBuf, Result<MovesDance, OfflineError>)>;
+
 /// Reads every BVH file in `dir` on `jobs` threads; each file's dance or why it could not be
 /// read, in name order.
 pub fn read_moves_folder(
     dir: &Path,
     settings: &ImportSettings,
     jobs: usize,
-) -> Result<Vec<(PathBuf, Result<MovesDance, OfflineError>)>, OfflineError> {
+) -> Result<MovesFolder, OfflineError> {
     let files = bvh_files(dir)?;
     if files.is_empty() {
         return Err(OfflineError::NoDances(dir.to_path_buf()));

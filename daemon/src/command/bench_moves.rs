@@ -187,7 +187,7 @@ fn dance_switches(
     let mut k = 4;
     while k + 1 < beats.len() {
         let t = beats[k] + random() * (beats[k + 1] - beats[k]);
-        cues.push((t, cues.len() % 2 == 0));
+        cues.push((t, cues.len().is_multiple_of(2)));
         k += 8;
     }
     let mut poses = Vec::with_capacity(frames);
