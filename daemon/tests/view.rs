@@ -412,8 +412,14 @@ fn danced_view_plays_a_dance_file_with_its_song() {
         "audio clock in the page: {}",
         page.eval("window.danced.audioTime").unwrap()
     );
+    // The file as danced reads it: the held pose, put on the floor (ROOT floats it).
+    let read = offline::moves::read_dance(&bvh, &Default::default()).unwrap();
+    assert!(
+        (read.poses[0].root_position - pose.root_position - Vec3::Y * read.floor_shift_m).length()
+            < 1e-3
+    );
     let mut want = [Vec3::ZERO; JOINT_COUNT];
-    skeleton.world_positions(&pose, &mut want);
+    skeleton.world_positions(&read.poses[0], &mut want);
     wait_for_pose(&page, "pose-7 from the file", &want);
     drop(page);
     drop(chrome);
