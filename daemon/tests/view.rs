@@ -98,7 +98,8 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
 
     let ctx = LiveContext::new();
     let (writer, reader) = ctx.ring();
-    let mut hub = ControlHub::new(&bank, ctx.stats.clone());
+    let moves = vec!["first".to_string(), "second".to_string()];
+    let mut hub = ControlHub::new(&bank, ctx.stats.clone()).with_moves(moves.clone());
     let poses = hub.pose_names();
     let feed = LiveFeed {
         stats: ctx.stats.clone(),
@@ -110,6 +111,7 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
         poses: poses.clone(),
         rate_hz: 60.0,
         model_rate_hz: 25.0,
+        moves,
         ..ViewHello::default()
     };
     let (server, sink) = ViewServer::start(
@@ -234,14 +236,21 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
         )
         .unwrap();
     assert_eq!(routed, serde_json::Value::Bool(true));
+    // And the moves: offered (two sets), switched on the next bar.
+    let moved = page
+        .eval(
+            "const m = document.getElementById('movesSelect');              const shown = !document.body.classList.contains('no-moves') && m.options.length === 2;              m.value = 'second'; m.dispatchEvent(new Event('change')); shown",
+        )
+        .unwrap();
+    assert_eq!(moved, serde_json::Value::Bool(true));
     testkit::wait_until(Duration::from_secs(20), || {
-        ctx.stats.controls_accepted.load(Ordering::Relaxed) >= 7
+        ctx.stats.controls_accepted.load(Ordering::Relaxed) >= 8
     });
 
     // The presses went through the control path (validated and counted like OSC's).
     let applied = ctx.stats.controls_accepted.load(Ordering::Relaxed);
-    assert_eq!(applied, 7, "controls applied");
-    assert_eq!(server.report().controls_accepted, 7);
+    assert_eq!(applied, 8, "controls applied");
+    assert_eq!(server.report().controls_accepted, 8);
     assert_eq!(server.report().controls_ignored, 0);
 
     let png = page.screenshot_png().unwrap();
