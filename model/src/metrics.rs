@@ -22,7 +22,7 @@ mod quality;
 
 pub use beats::{
     BEAT_ALIGN_SIGMA_S, BEAT_MINIMA_HALF_WINDOW_S, BeatOffset, beat_align, beat_offset, hips_beats,
-    kinematic_beats,
+    kinematic_beats, summed_joint_speed,
 };
 pub use frechet::{Gaussian, fmd, fpd, frechet_distance, frechet_distance_gaussians};
 pub use kinetic::{
@@ -106,7 +106,7 @@ impl<'a> JointTrack<'a> {
     }
 
     /// One joint position in double precision.
-    pub fn pos(&self, frame: usize, joint: usize) -> DVec3 {
+    fn pos(&self, frame: usize, joint: usize) -> DVec3 {
         self.positions[frame * self.joints + joint].as_dvec3()
     }
 

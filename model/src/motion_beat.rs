@@ -23,7 +23,7 @@
 use glam::Vec3;
 
 use crate::ModelError;
-use crate::metrics::{JointTrack, kinematic_beats};
+use crate::metrics::{JointTrack, kinematic_beats, summed_joint_speed};
 
 /// Slowest beat the grid looks for, BPM.
 pub const MIN_TEMPO_BPM: f64 = 55.0;
@@ -85,19 +85,15 @@ impl MotionBeatGrid {
     }
 }
 
-/// The summed joint speed between consecutive frames, m/s, at frame midpoints: FACT's
-/// kinematic-beat envelope. (Taking the hips' travel out, or reading the feet alone, found the
-/// music's tempo on fewer of the tang2018 dances: 16 and 14 of 38 against 24.)
-fn speed(track: &JointTrack<'_>) -> Vec<f64> {
-    let fps = track.fps();
-    (0..track.frames().saturating_sub(1))
-        .map(|i| {
-            (0..track.joints())
-                .map(|j| (track.pos(i + 1, j) - track.pos(i, j)).length())
-                .sum::<f64>()
-                * fps
-        })
-        .collect()
+/// The vertex of the parabola through `(−1, l)`, `(0, c)`, `(1, r)`, as an offset from the
+/// middle sample in [−0.5, 0.5]; 0 unless `c` is a peak.
+fn parabolic_offset(l: f64, c: f64, r: f64) -> f64 {
+    let denom = l - 2.0 * c + r;
+    if denom < 0.0 {
+        (0.5 * (l - r) / denom).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    }
 }
 
 /// Mean of `x` over `i − half ..= i + half` (clamped to the ends), for every `i`.
@@ -181,15 +177,7 @@ fn period_frames(dips: &[f64], fps: f64) -> Option<f64> {
     if values[best] <= 0.0 {
         return None;
     }
-    // Parabolic interpolation around the peak.
-    let (l, c, r) = (values[best - 1], values[best], values[best + 1]);
-    let denom = l - 2.0 * c + r;
-    let shift = if denom < 0.0 {
-        (0.5 * (l - r) / denom).clamp(-0.5, 0.5)
-    } else {
-        0.0
-    };
-    Some(best as f64 + shift)
+    Some(best as f64 + parabolic_offset(values[best - 1], values[best], values[best + 1]))
 }
 
 /// Beat frames by Ellis's dynamic programme over `dips` at `period` frames.
@@ -276,7 +264,9 @@ pub fn motion_beat_grid(track: &JointTrack<'_>) -> Result<MotionBeatGrid, ModelE
             found: track.frames(),
         });
     }
-    let speed = speed(track);
+    // FACT's kinematic-beat envelope. (Taking the hips' travel out, or reading the feet alone,
+    // found the music's tempo on fewer of the tang2018 dances: 16 and 14 of 38 against 24.)
+    let speed = summed_joint_speed(track);
     let dips = dip_strength(&speed, fps);
     let period = period_frames(&dips, fps).ok_or(ModelError::NoPulse)?;
     let frames = beat_frames(&dips, period);
@@ -288,17 +278,11 @@ pub fn motion_beat_grid(track: &JointTrack<'_>) -> Result<MotionBeatGrid, ModelE
     let beats_s: Vec<f64> = frames
         .iter()
         .map(|&i| {
-            let (l, c, r) = (
+            let shift = parabolic_offset(
                 dips[i.saturating_sub(1)],
                 dips[i],
                 dips[(i + 1).min(dips.len() - 1)],
             );
-            let denom = l - 2.0 * c + r;
-            let shift = if denom < 0.0 {
-                (0.5 * (l - r) / denom).clamp(-0.5, 0.5)
-            } else {
-                0.0
-            };
             (i as f64 + 0.5 + shift) / fps
         })
         .collect();

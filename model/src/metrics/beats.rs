@@ -56,17 +56,23 @@ pub fn kinematic_beats(track: &JointTrack<'_>) -> Vec<f64> {
         return Vec::new();
     }
     let fps = track.fps();
-    let speed: Vec<f64> = (0..n - 1)
+    local_minima(&summed_joint_speed(track), minima_order(fps))
+        .into_iter()
+        .map(|k| (k + 0.5) / fps)
+        .collect()
+}
+
+/// FACT's kinematic-beat envelope: the speed of every joint between consecutive frames, summed
+/// over joints, m/s; sample `i` sits at `(i + 0.5) / fps`. Empty for fewer than two frames.
+pub fn summed_joint_speed(track: &JointTrack<'_>) -> Vec<f64> {
+    let fps = track.fps();
+    (0..track.frames().saturating_sub(1))
         .map(|i| {
             (0..track.joints())
                 .map(|j| (track.pos(i + 1, j) - track.pos(i, j)).length())
                 .sum::<f64>()
                 * fps
         })
-        .collect();
-    local_minima(&speed, minima_order(fps))
-        .into_iter()
-        .map(|k| (k + 0.5) / fps)
         .collect()
 }
 
