@@ -172,6 +172,11 @@ impl ClipLibrary {
     /// Cuts each (poses, cues) pair, 25 fps and frame-aligned, into one-beat clips at the
     /// frames where the beat phase wraps; see [`ClipLibrary::from_dances`].
     pub fn from_cues(dances: &[(Vec<Pose>, Vec<FrameCue>)]) -> Self {
+        Self::from_cues_counted(dances).0
+    }
+
+    /// [`ClipLibrary::from_cues`], with how many clips each dance gave.
+    pub fn from_cues_counted(dances: &[(Vec<Pose>, Vec<FrameCue>)]) -> (Self, Vec<usize>) {
         let mut lib = ClipLibrary {
             poses: Vec::new(),
             clips: Vec::new(),
@@ -179,7 +184,9 @@ impl ClipLibrary {
         };
         let mut phases = Vec::new();
         let mut wraps = Vec::new();
+        let mut counts = Vec::with_capacity(dances.len());
         for (poses, cues) in dances {
+            let before = lib.clips.len();
             let n = poses.len().min(cues.len());
             phases.clear();
             wraps.clear();
@@ -204,11 +211,12 @@ impl ClipLibrary {
                 }
                 lib.push_clip(&poses[s..=e], &cues[s..=e], phases[s], phases[e]);
             }
+            counts.push(lib.clips.len() - before);
         }
         let mut motions: Vec<f32> = lib.clips.iter().map(|c| c.motion).collect();
         motions.sort_by(f32::total_cmp);
         lib.typical_motion = motions.get(motions.len() / 2).copied().unwrap_or(0.0);
-        lib
+        (lib, counts)
     }
 
     /// Appends one clip made of `poses` (len + 1 frames) and the cues under them.

@@ -162,14 +162,6 @@ pub struct MovesDance {
     pub import: ImportSummary,
 }
 
-/// `poses` at `fps` resampled to [`RETRIEVAL_FPS`].
-fn to_library_rate(poses: &[Pose], fps: f64) -> Vec<Pose> {
-    let speed = fps / RETRIEVAL_FPS;
-    let frames = ((poses.len().saturating_sub(1)) as f64 / speed).floor() as usize + 1;
-    let times: Vec<f64> = (0..frames).map(|j| j as f64 * speed).collect();
-    crate::dataset::warp_poses(poses, &times)
-}
-
 /// Reads one dance and finds its beat grid.
 pub fn read_moves_dance(
     path: &Path,
@@ -191,7 +183,8 @@ pub fn read_moves_dance(
             .unwrap_or_default(),
         path: path.to_path_buf(),
         seconds: track.duration_s(),
-        poses: to_library_rate(&imported.poses, imported.fps),
+        // At the library's rate: played `fps / RETRIEVAL_FPS` times as fast, a frame at a time.
+        poses: crate::dataset::resample_poses(&imported.poses, imported.fps / RETRIEVAL_FPS),
         grid,
         import: ImportSummary::of(&imported),
     })
@@ -288,21 +281,23 @@ pub fn library(dances: &[MovesDance]) -> (ClipLibrary, Vec<usize>) {
         }
         all.partition_point(|&x| x < v) as f32 / (all.len() - 1) as f32
     };
-    let mut counts = Vec::with_capacity(dances.len());
-    let mut cued = Vec::new();
-    let mut library = ClipLibrary::from_cues(&[]);
-    for (dance, intensity) in dances.iter().zip(&intensities) {
-        if dance.grid.confidence < MIN_CONFIDENCE {
-            counts.push(0);
-            continue;
-        }
-        let ranks: Vec<f32> = intensity.iter().map(|&v| rank(v).clamp(0.0, 1.0)).collect();
-        let one = [(dance.poses.clone(), cues(dance, &ranks))];
-        counts.push(ClipLibrary::from_cues(&one).clips.len());
-        cued.push(one.into_iter().next().expect("one dance"));
-    }
-    if !cued.is_empty() {
-        library = ClipLibrary::from_cues(&cued);
+    let kept: Vec<usize> = (0..dances.len())
+        .filter(|&i| dances[i].grid.confidence >= MIN_CONFIDENCE)
+        .collect();
+    let cued: Vec<(Vec<Pose>, Vec<FrameCue>)> = kept
+        .iter()
+        .map(|&i| {
+            let ranks: Vec<f32> = intensities[i]
+                .iter()
+                .map(|&v| rank(v).clamp(0.0, 1.0))
+                .collect();
+            (dances[i].poses.clone(), cues(&dances[i], &ranks))
+        })
+        .collect();
+    let (library, kept_counts) = ClipLibrary::from_cues_counted(&cued);
+    let mut counts = vec![0; dances.len()];
+    for (&i, c) in kept.iter().zip(kept_counts) {
+        counts[i] = c;
     }
     (library, counts)
 }
