@@ -18,6 +18,15 @@ use crate::rotation::rotation_between;
 
 /// Most frames read to find the axes.
 const SAMPLE_FRAMES: usize = 240;
+/// Joints above the hips that say where up is, the first mapped one used.
+pub(crate) const ABOVE_HIPS: [Joint; 4] =
+    [Joint::Head, Joint::Neck, Joint::UpperChest, Joint::Chest];
+/// Left–right pairs that say where the body's left is.
+const LEFT_RIGHT: [(Joint, Joint); 3] = [
+    (Joint::LeftUpperLeg, Joint::RightUpperLeg),
+    (Joint::LeftUpperArm, Joint::RightUpperArm),
+    (Joint::LeftShoulder, Joint::RightShoulder),
+];
 
 /// The file's axes as found, and how sure the finding is.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -89,17 +98,11 @@ pub fn detect_axes(
 ) -> Option<DetectedAxes> {
     let s = |j: Joint| source_joints[j.index()];
     let hips = s(Joint::Hips)?;
-    let top = [Joint::Head, Joint::Neck, Joint::UpperChest, Joint::Chest]
+    let top = ABOVE_HIPS.into_iter().find_map(s)?;
+    let pairs: Vec<(usize, usize)> = LEFT_RIGHT
         .into_iter()
-        .find_map(s)?;
-    let pairs: Vec<(usize, usize)> = [
-        (Joint::LeftUpperLeg, Joint::RightUpperLeg),
-        (Joint::LeftUpperArm, Joint::RightUpperArm),
-        (Joint::LeftShoulder, Joint::RightShoulder),
-    ]
-    .into_iter()
-    .filter_map(|(l, r)| Some((s(l)?, s(r)?)))
-    .collect();
+        .filter_map(|(l, r)| Some((s(l)?, s(r)?)))
+        .collect();
     if pairs.is_empty() {
         return None;
     }
@@ -215,23 +218,16 @@ pub(crate) fn upright(
     let Some(hips) = s(Joint::Hips) else {
         return glam::Quat::IDENTITY;
     };
-    let Some(top) = [Joint::Head, Joint::Neck, Joint::UpperChest, Joint::Chest]
-        .into_iter()
-        .find_map(s)
-    else {
+    let Some(top) = ABOVE_HIPS.into_iter().find_map(s) else {
         return glam::Quat::IDENTITY;
     };
     let Some(up) = snap(positions[top] - positions[hips]) else {
         return glam::Quat::IDENTITY;
     };
-    let left_sum: Vec3 = [
-        (Joint::LeftUpperLeg, Joint::RightUpperLeg),
-        (Joint::LeftUpperArm, Joint::RightUpperArm),
-        (Joint::LeftShoulder, Joint::RightShoulder),
-    ]
-    .into_iter()
-    .filter_map(|(l, r)| Some((positions[s(l)?] - positions[s(r)?]).normalize_or_zero()))
-    .sum();
+    let left_sum: Vec3 = LEFT_RIGHT
+        .into_iter()
+        .filter_map(|(l, r)| Some((positions[s(l)?] - positions[s(r)?]).normalize_or_zero()))
+        .sum();
     match snap(left_sum - up * left_sum.dot(up)) {
         Some(left) if left.dot(up).abs() < 0.5 => {
             glam::Quat::from_mat3(&map_to_ours(left, up, left.cross(up))).normalize()

@@ -64,8 +64,8 @@
 use glam::{Mat3, Quat, Vec3};
 
 use super::Bvh;
-use super::axes::{detect_axes, upright};
-use super::names::match_joints;
+use super::axes::{ABOVE_HIPS, detect_axes, upright};
+use super::names::{NameMatch, match_joints};
 use crate::ModelError;
 use crate::rig::{JOINT_COUNT, Joint, Pose, Skeleton};
 use crate::rotation::{normalize_or_identity, rotation_between, twist_angle};
@@ -187,10 +187,18 @@ pub fn retarget(
     options: &RetargetOptions,
 ) -> Result<Retargeted, ModelError> {
     bvh.validate()?;
-    let n = bvh.joints.len();
+    retarget_matched(bvh, skeleton, options, match_joints(bvh, &options.names))
+}
 
+/// [`retarget`] of a validated `bvh` whose joints `names` has read.
+fn retarget_matched(
+    bvh: &Bvh,
+    skeleton: &Skeleton,
+    options: &RetargetOptions,
+    names: NameMatch,
+) -> Result<Retargeted, ModelError> {
+    let n = bvh.joints.len();
     // Which of our joints each source joint drives.
-    let names = match_joints(bvh, &options.names);
     let driven = names.driven;
     let mut source_joints: [Option<usize>; JOINT_COUNT] = [None; JOINT_COUNT];
     for (i, d) in driven.iter().enumerate() {
@@ -727,16 +735,14 @@ pub fn import(
     skeleton: &Skeleton,
     options: &RetargetOptions,
 ) -> Result<Retargeted, ModelError> {
+    bvh.validate()?;
     let names = match_joints(bvh, &options.names);
     let driven = |j: Joint| names.driven.contains(&Some(j));
     let mut missing: Vec<Joint> = REQUIRED_JOINTS
         .into_iter()
         .filter(|&j| !driven(j))
         .collect();
-    if ![Joint::Head, Joint::Neck, Joint::UpperChest, Joint::Chest]
-        .into_iter()
-        .any(driven)
-    {
+    if !ABOVE_HIPS.into_iter().any(driven) {
         missing.push(Joint::Head);
     }
     if !missing.is_empty() {
@@ -770,5 +776,5 @@ pub fn import(
             example,
         });
     }
-    retarget(bvh, skeleton, options)
+    retarget_matched(bvh, skeleton, options, names)
 }
