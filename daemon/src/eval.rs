@@ -328,7 +328,6 @@ impl EvalSet {
             system: system.to_string(),
             ..Default::default()
         };
-        let toes = [Joint::LeftToes.index(), Joint::RightToes.index()];
         for (i, (track, dance)) in tracks.iter().zip(&self.validation).enumerate() {
             row.seconds += track.duration_s();
             let on = beat_align(track, &dance.beats);
@@ -343,16 +342,7 @@ impl EvalSet {
                 row.beat_offset_s += o.mean_s / n as f64;
             }
             row.freezes += detect_freezes(track, FreezeParams::default())?.freezes;
-            let ground_y_m = toe_floor_y(track, &toes)?;
-            let s = foot_skating(
-                track,
-                &toes,
-                ContactParams {
-                    ground_y_m,
-                    ..ContactParams::default()
-                },
-            )?;
-            row.foot_skate_mps += s.mean_speed_mps / n as f64;
+            row.foot_skate_mps += foot_skating_mps(track)? / n as f64;
             if let Some(r) = quiet_phrase_ratio(&positions[i], &dance.music) {
                 row.quiet_phrase_speed_ratio += r;
                 row.quiet_phrase_dances += 1;
@@ -667,8 +657,24 @@ fn tally_windows(
     }
 }
 
+/// Foot skating of a track (our rig's joints): the toes' horizontal speed while planted, m/s,
+/// with the floor under the toes.
+pub fn foot_skating_mps(track: &JointTrack<'_>) -> Result<f64> {
+    let toes = [Joint::LeftToes.index(), Joint::RightToes.index()];
+    let ground_y_m = toe_floor_y(track, &toes)?;
+    let s = foot_skating(
+        track,
+        &toes,
+        ContactParams {
+            ground_y_m,
+            ..ContactParams::default()
+        },
+    )?;
+    Ok(s.mean_speed_mps)
+}
+
 /// The midpoints between consecutive beats: where a dancer at chance is as often as on the beat.
-fn half_beat_later(beats: &[f64]) -> Vec<f64> {
+pub fn half_beat_later(beats: &[f64]) -> Vec<f64> {
     beats.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect()
 }
 

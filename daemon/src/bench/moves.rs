@@ -3,30 +3,19 @@
 
 use anyhow::Result;
 use glam::Vec3;
-use model::metrics::{
-    ContactParams, FreezeParams, JointTrack, beat_align, detect_freezes, foot_skating, toe_floor_y,
-};
-use model::rig::{JOINT_COUNT, Joint};
+use model::metrics::{FreezeParams, JointTrack, beat_align, detect_freezes};
+use model::rig::JOINT_COUNT;
 
-use crate::eval::{STYLE_WINDOW_S, StyleClassifier, TEMPO_BANDS, windows_of};
+use crate::eval::{
+    STYLE_WINDOW_S, StyleClassifier, TEMPO_BANDS, foot_skating_mps, half_beat_later, windows_of,
+};
 
 /// Frames a second of every track here.
 const FPS: f64 = model::retrieval::RETRIEVAL_FPS;
 
-/// Foot skating of a track, m/s while a toe is planted, with the floor under its toes.
+/// Foot skating of a track ([`foot_skating_mps`] of its positions at 25 fps).
 pub fn skating(positions: &[Vec3]) -> Result<f64> {
-    let track = JointTrack::new(positions, JOINT_COUNT, FPS)?;
-    let toes = [Joint::LeftToes.index(), Joint::RightToes.index()];
-    let ground_y_m = toe_floor_y(&track, &toes)?;
-    Ok(foot_skating(
-        &track,
-        &toes,
-        ContactParams {
-            ground_y_m,
-            ..ContactParams::default()
-        },
-    )?
-    .mean_speed_mps)
+    foot_skating_mps(&JointTrack::new(positions, JOINT_COUNT, FPS)?)
 }
 
 /// The judge's class for the library's source dances; classes below it are tang2018's styles.
@@ -80,7 +69,7 @@ impl SongScore {
         judge: Option<&StyleClassifier>,
     ) -> Result<SongScore> {
         let track = JointTrack::new(positions, JOINT_COUNT, FPS)?;
-        let off: Vec<f64> = beats.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+        let off = half_beat_later(beats);
         let mut judged = [0; 2];
         if let Some(judge) = judge {
             for w in windows_of(positions, (STYLE_WINDOW_S * FPS) as usize) {

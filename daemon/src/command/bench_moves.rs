@@ -98,10 +98,7 @@ pub fn bench_moves(args: BenchMovesArgs) -> Result<()> {
             source_skating: tang_skating,
         },
     ];
-    let stage = model::stage::StageSettings {
-        mode: model::stage::StageMode::parse(&args.stage).unwrap_or_default(),
-        ..Default::default()
-    };
+    let stage = crate::command::source::stage_in_mode(&args.stage);
     println!(
         "on a {} stage, temperature {}, seed {}",
         args.stage, args.temperature, args.seed
@@ -125,16 +122,15 @@ pub fn bench_moves(args: BenchMovesArgs) -> Result<()> {
             .seconds
             .map_or(usize::MAX, |s| (s * RETRIEVAL_FPS) as usize);
         for (row, dancer) in rows.iter_mut().zip(dancers.iter_mut()) {
-            let look = dancer.lookahead_frames();
-            dancer.reset(args.seed);
-            let frames = limit.min(music.len().saturating_sub(look));
-            let poses =
-                crate::offline_dance::dance_stream(&mut **dancer, &music, 0, frames, |_| {
-                    Controls {
-                        temperature: args.temperature,
-                        ..Controls::default()
-                    }
-                });
+            let poses = crate::eval::dance_to(
+                &mut **dancer,
+                &music,
+                limit,
+                args.temperature,
+                args.seed,
+                &[],
+                0,
+            );
             let positions = skeleton.trajectory(&poses);
             row.songs
                 .push(SongScore::of(&positions, &item.beats, bpm, judge.as_ref())?);

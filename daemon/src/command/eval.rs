@@ -58,10 +58,7 @@ pub struct EvalArgs {
 impl EvalArgs {
     /// The stage the dancers dance on.
     fn stage(&self) -> model::stage::StageSettings {
-        model::stage::StageSettings {
-            mode: model::stage::StageMode::parse(&self.stage).unwrap_or_default(),
-            ..Default::default()
-        }
+        crate::command::source::stage_in_mode(&self.stage)
     }
 }
 

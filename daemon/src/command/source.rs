@@ -51,6 +51,15 @@ pub fn parse_stage_mode(s: &str) -> Result<String, String> {
         .ok_or_else(|| format!("{s:?}: expected bounded, in_place or free"))
 }
 
+/// The default stage in mode `mode` (a name [`parse_stage_mode`] accepted; anything else is
+/// the default mode).
+pub fn stage_in_mode(mode: &str) -> model::stage::StageSettings {
+    model::stage::StageSettings {
+        mode: model::stage::StageMode::parse(mode).unwrap_or_default(),
+        ..Default::default()
+    }
+}
+
 fn parse_centre(s: &str) -> Result<[f32; 2], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     match parts.as_slice() {
