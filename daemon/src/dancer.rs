@@ -199,6 +199,17 @@ pub fn open_source(
     settings: &SourceSettings<'_>,
     seed: u64,
 ) -> Result<Box<dyn MotionSource + Send>> {
+    open_source_named(kind, settings, seed).map(|(source, _)| source)
+}
+
+/// [`open_source`], with the names of the sets of moves the source holds, in its order (the
+/// retrieval dancer's libraries; none for the neural dancer).
+pub fn open_source_named(
+    kind: SourceKind,
+    settings: &SourceSettings<'_>,
+    seed: u64,
+) -> Result<(Box<dyn MotionSource + Send>, Vec<String>)> {
+    let mut names = Vec::new();
     let source: Box<dyn MotionSource + Send> = match kind {
         SourceKind::Neural => {
             if !settings.libraries.is_empty() {
@@ -215,17 +226,16 @@ pub fn open_source(
                     "--network-only is for the neural source: the retrieval dancer has no network"
                 );
             }
-            let libraries = load_libraries(settings.libraries)?
-                .into_iter()
-                .map(|(_, l)| l)
-                .collect();
+            let (library_names, libraries) =
+                load_libraries(settings.libraries)?.into_iter().unzip();
+            names = library_names;
             Box::new(
                 RetrievalDancer::with_libraries(libraries, seed)
                     .context("starting the retrieval dancer")?,
             )
         }
     };
-    Ok(on_stage(source, settings.stage))
+    Ok((on_stage(source, settings.stage), names))
 }
 
 /// The clip library shipped in the repository (`configs/clips/tang2018-train.danclips`).

@@ -85,7 +85,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     };
     let kind = crate::dancer::SourceKind::parse(&config.dancer.source)
         .with_context(|| format!("unknown motion source {:?}", config.dancer.source))?;
-    let source = crate::dancer::open_source(
+    let (source, moves) = crate::dancer::open_source_named(
         kind,
         &crate::dancer::SourceSettings {
             network_only: false,
@@ -106,14 +106,6 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     };
     let osc = OscSink::from_config(config)?;
     let targets = osc.describe();
-    let moves: Vec<String> = if kind == crate::dancer::SourceKind::Retrieval {
-        crate::dancer::load_libraries(&config.dancer.libraries)?
-            .into_iter()
-            .map(|(name, _)| name)
-            .collect()
-    } else {
-        Vec::new()
-    };
     let _ = ctx.stats.moves_names.set(moves.clone());
     let mut hub = ControlHub::new(&poses, ctx.stats.clone())
         .honouring(source.controls())
