@@ -227,14 +227,15 @@ fn moves_metadata(
     dances: &[String],
     full_poses: usize,
 ) -> String {
-    let json = |s: &str| s.replace('\\', "\\\\").replace('"', "\\\"");
-    let names: Vec<String> = dances.iter().map(|n| format!("\"{}\"", json(n))).collect();
-    format!(
-        "{{\"kind\": \"danced retrieval clip library\", \"name\": \"{}\", \"fps\": {}, \"clips\": {}, \"poses\": {}, \"poses_before_subsetting\": {full_poses}, \"source\": \"dances without music, cut on the beat found from their motion\", \"dances\": [{}]}}",
-        json(name),
-        model::retrieval::RETRIEVAL_FPS,
-        library.clips.len(),
-        library.poses.len(),
-        names.join(", ")
-    )
+    let metadata = serde_json::json!({
+        "kind": "danced retrieval clip library",
+        "name": name,
+        "fps": model::retrieval::RETRIEVAL_FPS,
+        "clips": library.clips.len(),
+        "poses": library.poses.len(),
+        "poses_before_subsetting": full_poses,
+        "source": "dances without music, cut on the beat found from their motion",
+        "dances": dances,
+    });
+    serde_json::to_string_pretty(&metadata).unwrap_or_default()
 }
