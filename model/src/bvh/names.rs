@@ -27,8 +27,18 @@ use super::Bvh;
 struct Convention {
     /// What users call it.
     name: &'static str,
-    /// Normalised source names and our joints.
+    /// Normalised source names and our joints; empty for our own names ([`Joint::name`]).
     table: &'static [(&'static str, Joint)],
+}
+
+impl Convention {
+    /// The joint the normalised name `key` drives in this convention.
+    fn lookup(&self, key: &str) -> Option<Joint> {
+        if self.table.is_empty() {
+            return Joint::from_name(key);
+        }
+        self.table.iter().find(|(n, _)| *n == key).map(|&(_, j)| j)
+    }
 }
 
 use Joint::*;
@@ -37,30 +47,8 @@ use Joint::*;
 const CONVENTIONS: &[Convention] = &[
     Convention {
         name: "Unity humanoid",
-        table: &[
-            ("hips", Hips),
-            ("spine", Spine),
-            ("chest", Chest),
-            ("upperchest", UpperChest),
-            ("neck", Neck),
-            ("head", Head),
-            ("leftshoulder", LeftShoulder),
-            ("leftupperarm", LeftUpperArm),
-            ("leftlowerarm", LeftLowerArm),
-            ("lefthand", LeftHand),
-            ("rightshoulder", RightShoulder),
-            ("rightupperarm", RightUpperArm),
-            ("rightlowerarm", RightLowerArm),
-            ("righthand", RightHand),
-            ("leftupperleg", LeftUpperLeg),
-            ("leftlowerleg", LeftLowerLeg),
-            ("leftfoot", LeftFoot),
-            ("lefttoes", LeftToes),
-            ("rightupperleg", RightUpperLeg),
-            ("rightlowerleg", RightLowerLeg),
-            ("rightfoot", RightFoot),
-            ("righttoes", RightToes),
-        ],
+        // Our own joints' names (`Joint::name`).
+        table: &[],
     },
     Convention {
         name: "Mixamo",
@@ -508,7 +496,7 @@ pub fn joint_for_name(name: &str) -> Option<Joint> {
     let key = normalise(name);
     CONVENTIONS
         .iter()
-        .find_map(|c| c.table.iter().find(|(n, _)| *n == key).map(|&(_, j)| j))
+        .find_map(|c| c.lookup(&key))
         .filter(|_| key != "root")
         .or_else(|| match side_and_part(name)? {
             (Side::Centre, Part::Hips) => Some(Hips),
@@ -560,11 +548,7 @@ pub(crate) fn match_joints(bvh: &Bvh, user: &[(String, Joint)]) -> NameMatch {
     }
 
     // 2. The conventions' tables, the best-matching first.
-    let score = |c: &Convention| {
-        keys.iter()
-            .filter(|k| c.table.iter().any(|(n, _)| n == k))
-            .count()
-    };
+    let score = |c: &Convention| keys.iter().filter(|k| c.lookup(k).is_some()).count();
     let mut order: Vec<(usize, &Convention)> = CONVENTIONS.iter().enumerate().collect();
     order.sort_by_key(|&(i, c)| (std::cmp::Reverse(score(c)), i));
     let best = order.first().map(|&(_, c)| c).filter(|c| score(c) >= 3);
@@ -572,7 +556,7 @@ pub(crate) fn match_joints(bvh: &Bvh, user: &[(String, Joint)]) -> NameMatch {
         for (i, key) in keys.iter().enumerate() {
             // `root` drives the hips only when nothing else does (step 4): Unreal's root is
             // on the floor under the pelvis.
-            if let Some(&(_, j)) = convention.table.iter().find(|(n, _)| n == key)
+            if let Some(j) = convention.lookup(key)
                 && !(j == Hips && key == "root")
             {
                 assign(&mut driven, i, j);
