@@ -25,10 +25,12 @@ pub enum RtThread {
     Motion = 2,
     /// The sender thread.
     Sender = 3,
+    /// The thread that sends MIDI clock, tick by tick.
+    ClockOut = 4,
 }
 
 const NOT_COUNTED: u8 = u8::MAX;
-static COUNTS: [AtomicU64; 4] = [const { AtomicU64::new(0) }; 4];
+static COUNTS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
 static INSTALLED: AtomicBool = AtomicBool::new(false);
 
 thread_local! {

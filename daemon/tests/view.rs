@@ -132,6 +132,7 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
             source: Box::new(PoseHolder { pose: Pose::rest() }),
             sink: Box::new(sink.unwrap()),
             controls: hub,
+            clock: None,
         },
         reader,
     )

@@ -19,6 +19,9 @@ pub const TEMPERATURE_RANGE: (f32, f32) = (0.0, 2.0);
 /// Tempo hints outside this range (BPM) are rejected as nonsense.
 pub const TEMPO_HINT_RANGE: (f32, f32) = (30.0, 300.0);
 
+/// Largest single nudge of the followed clock, milliseconds either way.
+pub const NUDGE_MS_MAX: f32 = 250.0;
+
 /// Range a beat accent depth is clamped to.
 pub const BEAT_ACCENT_RANGE: (f32, f32) = (0.0, 0.9);
 
@@ -131,6 +134,17 @@ pub enum ControlEvent {
         /// When the switch lands (on a beat, or a bar's first beat).
         quantize: Quantize,
     },
+    /// A tap of tap tempo: the tap clock's beats are where the performer taps (the first tap
+    /// of a run is a bar's first beat).
+    Tap,
+    /// The beat heard nearest now is the first of its bar (on whichever clock is followed).
+    BeatOne,
+    /// Move every beat of the followed clock later by this many milliseconds (earlier when
+    /// negative), at most [`NUDGE_MS_MAX`] at a time.
+    Nudge(f32),
+    /// Follow another clock, by name (`audio`, `midi`, `link`, `tap`; lower-cased here,
+    /// resolved and counted by the receiver).
+    Clock(String),
 }
 
 /// Parses OSC control packets into [`ControlEvent`]s, counting what it could not use.
@@ -260,7 +274,7 @@ impl ControlParser {
                 }
                 ControlEvent::KeyPose { name, quantize }
             }
-            "/keypose/clear" | "/pause" | "/resume" => {
+            "/keypose/clear" | "/pause" | "/resume" | "/tap" | "/clock/one" => {
                 // Buttons in TouchOSC and TouchDesigner send 1 on press and 0 on release;
                 // only the press is the command.
                 if args.first().is_some_and(is_zero) {
@@ -269,9 +283,24 @@ impl ControlParser {
                 match suffix {
                     "/pause" => ControlEvent::Pause,
                     "/resume" => ControlEvent::Resume,
+                    "/tap" => ControlEvent::Tap,
+                    "/clock/one" => ControlEvent::BeatOne,
                     _ => ControlEvent::ClearKeyPose,
                 }
             }
+            "/clock/nudge" => {
+                let ms = one_float(args)?;
+                if !ms.is_finite() || ms.abs() > NUDGE_MS_MAX {
+                    return Err(Reject::BadArguments);
+                }
+                ControlEvent::Nudge(ms)
+            }
+            "/clock" => match args.as_slice() {
+                [OscType::String(s)] if !s.trim().is_empty() => {
+                    ControlEvent::Clock(s.trim().to_ascii_lowercase())
+                }
+                _ => return Err(Reject::BadArguments),
+            },
             "/style" => ControlEvent::DanceStyle(name_or_number(args, &STYLE_NUMBERS)?),
             "/moves" => {
                 let choice = match args.first() {
@@ -611,6 +640,27 @@ mod tests {
                     quantize: Quantize::NextBeat,
                 },
             ),
+            (msg("/danced/control/tap", vec![]), ControlEvent::Tap),
+            (
+                msg("/danced/control/tap", vec![OscType::Float(1.0)]),
+                ControlEvent::Tap,
+            ),
+            (
+                msg("/danced/control/clock/one", vec![]),
+                ControlEvent::BeatOne,
+            ),
+            (
+                msg("/danced/control/clock/nudge", vec![OscType::Float(-12.5)]),
+                ControlEvent::Nudge(-12.5),
+            ),
+            (
+                msg("/danced/control/clock/nudge", vec![OscType::Int(10)]),
+                ControlEvent::Nudge(10.0),
+            ),
+            (
+                msg("/danced/control/clock", vec![s(" MIDI ")]),
+                ControlEvent::Clock("midi".into()),
+            ),
         ];
         let n = cases.len() as u64;
         for (bytes, want) in cases {
@@ -684,6 +734,10 @@ mod tests {
             msg("/danced/control/seed", vec![OscType::Float(0.5)]),
             msg("/danced/control/tempo", vec![OscType::Float(20.0)]),
             msg("/danced/control/tempo", vec![OscType::Float(400.0)]),
+            msg("/danced/control/clock/nudge", vec![OscType::Float(300.0)]),
+            msg("/danced/control/clock/nudge", vec![]),
+            msg("/danced/control/clock", vec![s(" ")]),
+            msg("/danced/control/clock", vec![OscType::Int(1)]),
         ];
         for b in &bad {
             assert!(parse_one(&mut p, b).is_empty());
@@ -785,7 +839,7 @@ mod tests {
         fn any_arguments_at_our_addresses_are_counted_once_and_never_nan(
             suffix in prop::sample::select(vec![
                 "/temperature", "/keypose", "/keypose/clear", "/transition", "/seed", "/pause",
-                "/resume", "/tempo", "/nope",
+                "/resume", "/tempo", "/tap", "/clock", "/clock/one", "/clock/nudge", "/nope",
             ]),
             args in prop::collection::vec(prop_oneof![
                 any::<i32>().prop_map(OscType::Int),
@@ -806,6 +860,7 @@ mod tests {
                     ControlEvent::Temperature(x) => prop_assert!((0.0..=2.0).contains(&x)),
                     ControlEvent::TransitionBeats(x) => prop_assert!(x.is_finite() && x > 0.0),
                     ControlEvent::TempoHint(x) => prop_assert!((30.0..=300.0).contains(&x)),
+                    ControlEvent::Nudge(x) => prop_assert!(x.is_finite() && x.abs() <= NUDGE_MS_MAX),
                     ControlEvent::KeyPose { name, quantize } => {
                         prop_assert!(!name.trim().is_empty());
                         if let Quantize::InBeats(n) = quantize {

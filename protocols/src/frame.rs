@@ -92,6 +92,12 @@ pub enum AnalysisEvent {
         /// Level in dB (full scale).
         db: f32,
     },
+    /// How far the music is heard from the external clock followed: the median over the last
+    /// heard beats of each one's offset from the clock's nearest beat.
+    ClockOffset {
+        /// Milliseconds; positive when the music is heard after the clock's beats.
+        ms: f32,
+    },
     /// How far the music sits below its own recent loudest (`dsp::LevelFollower`): 0 dB in
     /// steady music, the drop's depth in a breakdown, whatever the mastering.
     RelativeLevel {

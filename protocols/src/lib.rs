@@ -11,6 +11,7 @@
 #![warn(missing_docs)]
 
 pub mod address;
+pub mod clock_grid;
 pub mod control;
 pub mod control_receiver;
 pub mod error;
@@ -21,27 +22,32 @@ pub mod midi;
 pub mod midi_clock;
 pub mod midi_input;
 pub mod midi_map;
+pub mod midi_output;
 pub mod native;
 mod osc_writer;
 pub mod output_counters;
 pub mod packet_pool;
 pub mod sender;
+pub mod tap_tempo;
 pub mod timetag;
 pub mod vmc;
 pub mod vrchat;
 
+pub use clock_grid::ClockGrid;
 pub use control::{ControlEvent, ControlParser, Quantize};
 pub use control_receiver::{ControlReceiver, DEFAULT_CONTROL_PORT};
 pub use error::ProtocolError;
 pub use frame::{AnalysisEvent, BodyFrame, BoneSample};
 pub use midi::{MidiMessage, MidiParser};
-pub use midi_clock::MidiClockTempo;
+pub use midi_clock::{MidiClockFollower, MidiClockLeader};
 pub use midi_input::{MidiConnection, MidiInputs, MidiPacket};
 pub use midi_map::MidiMap;
+pub use midi_output::MidiOutConnection;
 pub use native::{DEFAULT_NATIVE_PREFIX, NativeEncoder};
 pub use output_counters::OutputCounters;
 pub use packet_pool::PacketPool;
 pub use sender::{OscOutput, OscTarget, TargetKind, parse_target};
+pub use tap_tempo::TapTempo;
 pub use vmc::VmcEncoder;
 pub use vrchat::{
     VrchatEncoder, VrchatTrackerMap, unity_euler_degrees, unity_quat_from_euler_degrees,

@@ -1,12 +1,12 @@
 //! What MIDI input means to the dancer, loaded from a TOML file (format in the crate README).
 
 use crate::control::{
-    BEAT_ACCENT_RANGE, ControlEvent, KEY_ROUTE_NUMBERS, Quantize, STYLE_NUMBERS, TEMPERATURE_RANGE,
-    TEMPO_HINT_RANGE,
+    BEAT_ACCENT_RANGE, ControlEvent, KEY_ROUTE_NUMBERS, NUDGE_MS_MAX, Quantize, STYLE_NUMBERS,
+    TEMPERATURE_RANGE, TEMPO_HINT_RANGE,
 };
 use crate::error::ProtocolError;
 use crate::midi::{MidiMessage, MidiParser};
-use crate::midi_clock::{MidiClockTempo, TICKS_PER_BEAT};
+use crate::midi_clock::{MidiClockFollower, TICKS_PER_BEAT};
 use crate::midi_input::MidiPacket;
 use serde::Deserialize;
 use std::path::Path;
@@ -62,6 +62,39 @@ pub struct MovesRule {
     pub channel: Option<u8>,
 }
 
+/// What a note does to the followed clock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClockAction {
+    /// A tap of tap tempo.
+    Tap,
+    /// The beat heard nearest now is the first of its bar.
+    One,
+    /// Every beat `ms` earlier.
+    Earlier,
+    /// Every beat `ms` later.
+    Later,
+}
+
+/// One note → clock rule as written in the file (`[[clock]]`).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClockRule {
+    /// MIDI note number 0..=127.
+    pub note: u8,
+    /// What the note does.
+    pub action: ClockAction,
+    /// The nudge of `earlier` and `later`, milliseconds (10 when absent).
+    #[serde(default = "default_nudge_ms")]
+    pub ms: f32,
+    /// Channel 1..=16 this rule listens to; the map's `channel` when absent.
+    pub channel: Option<u8>,
+}
+
+fn default_nudge_ms() -> f32 {
+    10.0
+}
+
 /// One controller → parameter rule as written in the file.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -110,6 +143,9 @@ pub struct MidiMapConfig {
     /// Controller rules.
     #[serde(default, rename = "cc")]
     pub ccs: Vec<CcRule>,
+    /// Note → clock rules (tap tempo, beat one, nudges).
+    #[serde(default)]
+    pub clock: Vec<ClockRule>,
 }
 
 fn default_quantize() -> Quantize {
@@ -120,7 +156,7 @@ fn default_quantize() -> Quantize {
 #[derive(Clone, Debug)]
 pub struct MidiMap {
     config: MidiMapConfig,
-    clock: MidiClockTempo,
+    clock: MidiClockFollower,
     ticks_since_hint: usize,
     last_hint: Option<f32>,
     /// (channel, note) of the note that set the current key pose.
@@ -149,12 +185,17 @@ impl MidiMap {
         validate(&config).map_err(ProtocolError::MapInvalid)?;
         Ok(Self {
             config,
-            clock: MidiClockTempo::new(),
+            clock: MidiClockFollower::new(),
             ticks_since_hint: 0,
             last_hint: None,
             held: None,
             epoch: Instant::now(),
         })
+    }
+
+    /// The incoming MIDI clock, followed on the timestamps the messages came with.
+    pub fn clock(&self) -> &MidiClockFollower {
+        &self.clock
     }
 
     /// The validated rules.
@@ -182,7 +223,18 @@ impl MidiMap {
                 note,
                 velocity: _,
             } => {
-                if let Some(rule) = self.note_rule(channel, note) {
+                if let Some(rule) =
+                    self.config.clock.iter().find(|r| {
+                        r.note == note && listens(r.channel, self.config.channel, channel)
+                    })
+                {
+                    out.push(match rule.action {
+                        ClockAction::Tap => ControlEvent::Tap,
+                        ClockAction::One => ControlEvent::BeatOne,
+                        ClockAction::Earlier => ControlEvent::Nudge(-rule.ms),
+                        ClockAction::Later => ControlEvent::Nudge(rule.ms),
+                    });
+                } else if let Some(rule) = self.note_rule(channel, note) {
                     out.push(ControlEvent::KeyPose {
                         name: rule.pose.clone(),
                         quantize: rule.quantize.unwrap_or(self.config.default_quantize),
@@ -239,9 +291,12 @@ impl MidiMap {
             {
                 out.push(ControlEvent::StyleSeed(u64::from(program)));
             }
-            MidiMessage::Clock if self.config.clock_tempo => self.clock_tick(timestamp_us, out),
+            MidiMessage::Clock => self.clock_tick(timestamp_us, out),
+            MidiMessage::SongPosition(_) => {
+                self.clock.message(timestamp_us, message);
+            }
             MidiMessage::Start | MidiMessage::Continue | MidiMessage::Stop => {
-                self.clock.reset();
+                self.clock.message(timestamp_us, message);
                 self.ticks_since_hint = 0;
                 if self.config.transport {
                     out.push(if *message == MidiMessage::Stop {
@@ -279,7 +334,11 @@ impl MidiMap {
     }
 
     fn clock_tick(&mut self, timestamp_us: u64, out: &mut Vec<ControlEvent>) {
-        let bpm = self.clock.tick(timestamp_us);
+        self.clock.message(timestamp_us, &MidiMessage::Clock);
+        if !self.config.clock_tempo {
+            return;
+        }
+        let bpm = self.clock.tempo_bpm(timestamp_us).map(|b| b as f32);
         self.ticks_since_hint += 1;
         // At most one hint a beat: the clock's 24 ticks a beat would flood the dancer.
         if self.ticks_since_hint < TICKS_PER_BEAT {
@@ -313,39 +372,44 @@ fn validate(c: &MidiMapConfig) -> Result<(), String> {
         _ => Ok(()),
     };
     channel_ok(c.channel, "map")?;
+    // Every rule a note triggers, in one list: each note means one thing on its channel.
+    let mut keyed: Vec<(String, u8, Option<u8>)> = Vec::new();
     for (i, r) in c.notes.iter().enumerate() {
         let what = format!("note rule {} (note {})", i + 1, r.note);
-        if r.note > 127 {
-            return Err(format!("{what}: note is not in 0..=127"));
-        }
         if r.pose.trim().is_empty() {
             return Err(format!("{what}: pose name is empty"));
         }
-        channel_ok(r.channel, &what)?;
-        let ch = r.channel.or(c.channel);
-        if c.notes[..i]
-            .iter()
-            .any(|o| o.note == r.note && o.channel.or(c.channel) == ch)
-        {
-            return Err(format!("{what}: note mapped twice on the same channel"));
-        }
+        keyed.push((what, r.note, r.channel));
     }
     for (i, r) in c.moves.iter().enumerate() {
         let what = format!("moves rule {} (note {})", i + 1, r.note);
-        if r.note > 127 {
-            return Err(format!("{what}: note is not in 0..=127"));
-        }
         if r.moves.trim().is_empty() {
             return Err(format!("{what}: the moves' name is empty"));
         }
         if matches!(r.quantize, Some(Quantize::Now | Quantize::InBeats(_))) {
             return Err(format!("{what}: quantize is \"beat\" or \"bar\""));
         }
-        channel_ok(r.channel, &what)?;
-        let ch = r.channel.or(c.channel);
-        let same = |note: u8, channel: Option<u8>| note == r.note && channel.or(c.channel) == ch;
-        if c.notes.iter().any(|o| same(o.note, o.channel))
-            || c.moves[..i].iter().any(|o| same(o.note, o.channel))
+        keyed.push((what, r.note, r.channel));
+    }
+    for (i, r) in c.clock.iter().enumerate() {
+        let what = format!("clock rule {} (note {})", i + 1, r.note);
+        if !r.ms.is_finite() || r.ms <= 0.0 || r.ms > NUDGE_MS_MAX {
+            return Err(format!(
+                "{what}: ms must be in (0, {NUDGE_MS_MAX}], got {}",
+                r.ms
+            ));
+        }
+        keyed.push((what, r.note, r.channel));
+    }
+    for (i, (what, note, channel)) in keyed.iter().enumerate() {
+        if *note > 127 {
+            return Err(format!("{what}: note is not in 0..=127"));
+        }
+        channel_ok(*channel, what)?;
+        let ch = channel.or(c.channel);
+        if keyed[..i]
+            .iter()
+            .any(|(_, n, o)| n == note && o.or(c.channel) == ch)
         {
             return Err(format!("{what}: note mapped twice on the same channel"));
         }
@@ -597,6 +661,39 @@ mod tests {
     }
 
     #[test]
+    fn notes_tap_the_tempo_set_beat_one_and_nudge_the_clock() {
+        let mut m = MidiMap::from_toml_str(
+            "[[clock]]\nnote = 36\naction = \"tap\"\n[[clock]]\nnote = 37\naction = \"one\"\n\
+             [[clock]]\nnote = 38\naction = \"earlier\"\n[[clock]]\nnote = 39\naction = \"later\"\nms = 2.5\n",
+        )
+        .unwrap();
+        let on = |note| MidiMessage::NoteOn {
+            channel: 0,
+            note,
+            velocity: 100,
+        };
+        assert_eq!(map(&mut m, on(36)), vec![ControlEvent::Tap]);
+        assert_eq!(map(&mut m, on(37)), vec![ControlEvent::BeatOne]);
+        assert_eq!(map(&mut m, on(38)), vec![ControlEvent::Nudge(-10.0)]);
+        assert_eq!(map(&mut m, on(39)), vec![ControlEvent::Nudge(2.5)]);
+    }
+
+    #[test]
+    fn the_incoming_clock_is_followed_whether_or_not_it_hints_the_tempo() {
+        let mut m = MidiMap::from_toml_str("").unwrap();
+        let mut out = Vec::new();
+        m.map_at(0, &MidiMessage::Start, &mut out);
+        let tick = 60_000_000 / 125 / 24;
+        for i in 1..=24 * 2 {
+            m.map_at(i * tick, &MidiMessage::Clock, &mut out);
+        }
+        assert!(out.is_empty(), "no hints asked for: {out:?}");
+        let g = m.clock().grid(24 * 2 * tick, 4).unwrap();
+        assert!((g.tempo_bpm() - 125.0).abs() < 0.01);
+        assert!((g.time_of(0.0) - tick as f64).abs() < 1.0);
+    }
+
+    #[test]
     fn packets_from_the_input_go_through_parser_and_map() {
         let mut m = MidiMap::load(&configs().join("generic.toml")).unwrap();
         let mut parser = MidiParser::new();
@@ -648,6 +745,18 @@ mod tests {
             (
                 "[[cc]]\ncontroller = 1\ntarget = \"temperature\"\nmin = nan\nmax = 1",
                 "finite",
+            ),
+            (
+                "[[note]]\nnote = 5\npose = \"a\"\n[[clock]]\nnote = 5\naction = \"tap\"",
+                "clock rule 1 (note 5): note mapped twice",
+            ),
+            (
+                "[[clock]]\nnote = 5\naction = \"later\"\nms = 0",
+                "ms must be",
+            ),
+            (
+                "[[clock]]\nnote = 5\naction = \"sooner\"",
+                "unknown variant",
             ),
             ("colour = \"red\"", "colour"),
             ("not toml [", "MIDI map"),

@@ -182,6 +182,10 @@ impl NativeEncoder {
                 let args = [self.checked(db)];
                 self.write_floats(buf, "/relative_level", &args);
             }
+            AnalysisEvent::ClockOffset { ms } => {
+                let args = [self.checked(ms)];
+                self.write_floats(buf, "/clock/offset_ms", &args);
+            }
         }
     }
 

@@ -122,6 +122,7 @@ fn run_until(
             }),
             sink: Box::new(ChannelSink::new(tx)),
             controls: hub,
+            clock: None,
         },
         reader,
     )
@@ -395,6 +396,7 @@ fn a_stalled_sender_is_counted_and_its_full_pose_queue_too() {
                 stall: Some(Duration::from_secs(2)),
             }),
             controls: hub,
+            clock: None,
         },
         reader,
     )

@@ -273,6 +273,7 @@ pub fn replay_and_receive(
             source,
             sink: Box::new(sink),
             controls: hub,
+            clock: None,
         },
         reader,
     )?;

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::command::clock_args::ClockArgs;
 use crate::command::source::SourceArgs;
 use crate::command::view_flag::ViewFlag;
 use crate::live::config::Config;
@@ -27,6 +28,9 @@ pub struct DemoArgs {
     /// Where the browser view is served, if anywhere.
     #[command(flatten)]
     pub view: ViewFlag,
+    /// Where the beat grid comes from (tap, link), and the clocks danced leads.
+    #[command(flatten)]
+    pub clock: ClockArgs,
 }
 
 /// Runs `danced demo`.
@@ -37,10 +41,12 @@ pub fn demo(args: DemoArgs) -> Result<()> {
         stats_json,
         dancer,
         view,
+        clock,
     } = args;
     let mut config = Config::default();
     dancer.apply(&mut config);
     view.apply(&mut config);
+    clock.apply(&mut config);
     config.audio.duration = duration;
     config.stats_json = stats_json;
     if let Some(r) = rate {

@@ -10,6 +10,7 @@ pub mod bench_motion_beats;
 pub mod bench_moves;
 pub mod bench_stage;
 pub mod bvh_export;
+pub mod clock_args;
 pub mod dataset;
 pub mod demo;
 pub mod devices;

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
+use crate::command::clock_args::ClockArgs;
 use crate::command::source::SourceArgs;
 use crate::command::view_flag::ViewFlag;
 use crate::live::config::Config;
@@ -74,6 +75,9 @@ pub struct RunArgs {
     /// Where the browser view is served, if anywhere.
     #[command(flatten)]
     pub view: ViewFlag,
+    /// Where the beat grid comes from, and the clocks danced leads.
+    #[command(flatten)]
+    pub clock: ClockArgs,
     /// MIDI map (TOML; default: the built-in configs/midi/generic.toml).
     #[arg(long)]
     pub midi_map: Option<PathBuf>,
@@ -144,6 +148,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
     args.dancer.apply(&mut config);
     args.view.apply(&mut config);
+    args.clock.apply(&mut config);
     config.validate("command line")?;
     let audio = match (&config.audio.input, &config.audio.device) {
         (Some(i), _) => AudioSource::File(i.clone()),

@@ -9,7 +9,9 @@ use std::time::Duration;
 
 use dsp::{AnalysisSink, Analyzer, AnalyzerConfig, BeatEvent, FeatureFrame, HopFrame, OnsetEvent};
 
+use super::clock::ClockSnapshot;
 use super::context::LiveContext;
+use super::grid_steer::{GridSteer, WallMap};
 use super::ring::{BlockMarker, RingReader};
 use super::stats::Stats;
 use super::timeline::Anchor;
@@ -43,6 +45,8 @@ pub struct AnalysisSettings {
     pub model_rate: f64,
     /// Wall time without audio after which silence is analysed instead, seconds.
     pub silence_after_s: f64,
+    /// Audio seconds per wall second (1 live; the replay speed otherwise).
+    pub speed: f64,
 }
 
 /// The analysis thread's ends of its queues.
@@ -55,6 +59,10 @@ pub struct AnalysisQueues {
     pub anchors: rtrb::Producer<Anchor>,
     /// The motion thread, woken after each feature frame.
     pub motion_thread: Thread,
+    /// The clocks and the performer's corrections (`None`: the heard beats, as they are).
+    pub clock: Option<triple_buffer::Output<ClockSnapshot>>,
+    /// The grid followed, on the wall clock, to each clock danced leads (MIDI clock out, Link).
+    pub led: Vec<triple_buffer::Input<Option<protocols::ClockGrid>>>,
 }
 
 struct Out<'a> {
@@ -62,6 +70,9 @@ struct Out<'a> {
     stats: &'a Stats,
     base_time_s: f64,
     ingest_wall_ns: u64,
+    steer: GridSteer,
+    /// The stream clock at the newest block.
+    map: WallMap,
 }
 
 impl Out<'_> {
@@ -72,6 +83,8 @@ impl Out<'_> {
     }
 
     fn anchor(&mut self, a: Anchor) {
+        self.map.audio_end_s = a.audio_end_s;
+        self.map.wall_ns = a.wall_ns;
         if self.queues.anchors.push(a).is_err() {
             self.stats.anchors_dropped.fetch_add(1, Ordering::Relaxed);
         }
@@ -122,6 +135,7 @@ impl AnalysisSink for Out<'_> {
         frame.time_s += self.base_time_s;
         frame.decided_at_s += self.base_time_s;
         frame.grid = frame.grid.shifted(self.base_time_s);
+        self.choose_grid(&mut frame);
         let msg = FeatureMsg {
             frame,
             ingest_wall_ns: self.ingest_wall_ns,
@@ -131,6 +145,37 @@ impl AnalysisSink for Out<'_> {
             self.stats.features_dropped.fetch_add(1, Ordering::Relaxed);
         }
         self.queues.motion_thread.unpark();
+    }
+}
+
+impl Out<'_> {
+    /// Puts the followed clock's grid, nudged and with its bar as the performer set it, on the
+    /// frame; reports the clock and hands its beats to the clocks danced leads.
+    fn choose_grid(&mut self, frame: &mut FeatureFrame) {
+        let snapshot = match self.queues.clock.as_mut() {
+            Some(feed) => *feed.read(),
+            None => ClockSnapshot::default(),
+        };
+        let steered = self
+            .steer
+            .steer(&snapshot, &frame.grid, frame.time_s, &self.map);
+        frame.grid = steered.grid;
+        let c = &self.stats.clock;
+        c.source.store(snapshot.source.index(), Ordering::Relaxed);
+        c.tempo_bpm.set(steered.grid.tempo_bpm() as f32);
+        c.nudge_ms.set(snapshot.nudge_ms);
+        c.trim_ms.set(self.steer.trim_ms());
+        c.peers.store(snapshot.peers, Ordering::Relaxed);
+        c.offset_ms.set(self.steer.offset_ms().unwrap_or(f32::NAN));
+        if steered.fallback {
+            c.fallback_frames.fetch_add(1, Ordering::Relaxed);
+        }
+        if let Some(ms) = steered.new_offset_ms {
+            self.event(AnalysisEvent::ClockOffset { ms });
+        }
+        for led in &mut self.queues.led {
+            led.write(steered.wall);
+        }
     }
 }
 
@@ -153,6 +198,12 @@ pub fn run(
         stats: &stats,
         base_time_s: 0.0,
         ingest_wall_ns: 0,
+        steer: GridSteer::new(),
+        map: WallMap {
+            audio_end_s: 0.0,
+            wall_ns: last_wall_ns,
+            speed: settings.speed,
+        },
     };
     let silence_after_ns = (settings.silence_after_s * 1e9) as u64;
     let build = |rate: u32, channels: u16| {
@@ -294,6 +345,8 @@ mod tests {
             events,
             anchors,
             motion_thread: std::thread::current(),
+            clock: None,
+            led: Vec::new(),
         };
         (queues, (features_rx, events_rx, anchors_rx))
     }
@@ -304,6 +357,12 @@ mod tests {
             stats,
             base_time_s: 0.0,
             ingest_wall_ns: 0,
+            steer: GridSteer::new(),
+            map: WallMap {
+                audio_end_s: 0.0,
+                wall_ns: 0,
+                speed: 1.0,
+            },
         }
     }
 

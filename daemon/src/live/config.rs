@@ -61,6 +61,8 @@ pub struct Config {
     pub stage: StageConfig,
     /// The browser view.
     pub view: ViewConfig,
+    /// Where the beat grid comes from, and the clocks danced leads.
+    pub clock: ClockConfig,
     /// Write the run's stats here as JSON when it ends.
     pub stats_json: Option<PathBuf>,
 }
@@ -214,6 +216,42 @@ impl Default for ControlConfig {
             midi_map: None,
             poses: None,
         }
+    }
+}
+
+/// `[clock]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClockConfig {
+    /// Where the beat grid comes from: `audio` (the beats heard), `midi` (the MIDI clock on
+    /// `control.midi_port`), `link` (the Link session; needs `link = true`) or `tap`.
+    pub source: String,
+    /// Beats per bar of a MIDI clock or tapped beats (they do not say).
+    pub beats_per_bar: u32,
+    /// Pull an external clock's phase toward the beats heard.
+    pub trim: bool,
+    /// Join an Ableton Link session: followed with `source = "link"`, led otherwise.
+    pub link: bool,
+    /// Send MIDI clock from the grid followed to the output port whose name contains this.
+    pub midi_out: Option<String>,
+}
+
+impl Default for ClockConfig {
+    fn default() -> Self {
+        Self {
+            source: "audio".into(),
+            beats_per_bar: 4,
+            trim: false,
+            link: false,
+            midi_out: None,
+        }
+    }
+}
+
+impl ClockConfig {
+    /// The clock followed (a validated configuration always names one).
+    pub fn source(&self) -> super::clock::ClockSource {
+        super::clock::ClockSource::parse(&self.source).unwrap_or_default()
     }
 }
 
@@ -477,6 +515,45 @@ impl Config {
             return Err(bad(
                 "stage.facing_deg",
                 format!("= {f}: must be in -360..=360 degrees"),
+            ));
+        }
+        use super::clock::ClockSource;
+        match ClockSource::parse(&self.clock.source) {
+            None => {
+                return Err(bad(
+                    "clock.source",
+                    format!(
+                        "= {:?}: available: {}",
+                        self.clock.source,
+                        ClockSource::NAMES
+                    ),
+                ));
+            }
+            Some(ClockSource::Midi) if self.control.midi_port.is_none() => {
+                return Err(bad(
+                    "clock.source",
+                    "= \"midi\" needs control.midi_port (the port the clock comes in on)".into(),
+                ));
+            }
+            Some(ClockSource::Link) if !self.clock.link => {
+                return Err(bad(
+                    "clock.source",
+                    "= \"link\" needs clock.link = true".into(),
+                ));
+            }
+            Some(_) => {}
+        }
+        let b = self.clock.beats_per_bar;
+        if !(1..=16).contains(&b) {
+            return Err(bad(
+                "clock.beats_per_bar",
+                format!("= {b}: must be in 1..=16"),
+            ));
+        }
+        if self.clock.link && !super::link::AVAILABLE {
+            return Err(bad(
+                "clock.link",
+                "= true: this build has no Ableton Link (build with --features link)".into(),
             ));
         }
         if let Some(list) = &self.audio.channels {

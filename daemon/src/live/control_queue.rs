@@ -17,9 +17,10 @@ use std::time::Instant;
 use glam::Quat;
 use model::rig::JOINT_COUNT;
 use protocols::control::{
-    BEAT_ACCENT_RANGE, TEMPERATURE_RANGE, TEMPO_HINT_RANGE, valid_transition_beats,
+    BEAT_ACCENT_RANGE, NUDGE_MS_MAX, TEMPERATURE_RANGE, TEMPO_HINT_RANGE, valid_transition_beats,
 };
 
+use super::clock::{ClockDesk, ClockRefusal};
 use super::sink::PoseBank;
 use super::stats::Stats;
 use super::wire::{ControlEvent, Quantize};
@@ -135,6 +136,7 @@ pub struct ControlHub {
     params: Arc<Params>,
     names: Arc<HashMap<String, u16>>,
     moves: Arc<Vec<String>>,
+    clock: Option<ClockDesk>,
     table: Vec<[Quat; JOINT_COUNT]>,
     consumers: Vec<rtrb::Consumer<MotionCommand>>,
     stats: Arc<Stats>,
@@ -158,6 +160,7 @@ impl ControlHub {
             params: Arc::new(Params::default()),
             names: Arc::new(names),
             moves: Arc::new(Vec::new()),
+            clock: None,
             table,
             consumers: Vec::new(),
             stats,
@@ -177,19 +180,27 @@ impl ControlHub {
         self
     }
 
+    /// Passes taps, nudges, "beat one" and clock choices to `desk` (without one they are
+    /// refused as unsupported).
+    pub fn with_clock(mut self, desk: ClockDesk) -> Self {
+        self.clock = Some(desk);
+        self
+    }
+
     /// A sender for one more input (each input thread owns its own).
     pub fn sender(&mut self) -> ControlSender {
         let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
         self.consumers.push(consumer);
         ControlSender {
             honoured: self.honoured,
-            warned: [false; 4],
+            warned: [false; 5],
             producer,
             params: self.params.clone(),
             names: self.names.clone(),
             moves: self.moves.clone(),
+            clock: self.clock.clone(),
             stats: self.stats.clone(),
-            buckets: [TokenBucket::new(); 3],
+            buckets: [TokenBucket::new(); 4],
         }
     }
 
@@ -256,6 +267,8 @@ pub enum ControlRefusal {
     UnknownPose(String),
     /// No set of moves of that name or number.
     UnknownMoves(String),
+    /// No clock of that name.
+    UnknownClock(String),
     /// A value outside its parameter's range, or not finite.
     OutOfRange,
     /// More events to this address than the rate limit allows.
@@ -278,6 +291,9 @@ pub enum UnsupportedControl {
     BeatAccent,
     /// `/danced/control/moves`.
     Moves,
+    /// `/danced/control/clock` (a clock this run does not have), tap, nudge and beat one
+    /// (a run without a clock desk).
+    Clock,
 }
 
 impl UnsupportedControl {
@@ -296,6 +312,9 @@ impl UnsupportedControl {
             UnsupportedControl::Moves => {
                 "/danced/control/moves refused: the loaded dancer has one set of moves (give the retrieval dancer several --library files)"
             }
+            UnsupportedControl::Clock => {
+                "/danced/control/clock refused: that clock is not in this run (midi needs control.midi_port; link needs clock.link = true in a build with Link)"
+            }
         }
     }
 }
@@ -304,15 +323,17 @@ impl UnsupportedControl {
 pub struct ControlSender {
     honoured: SourceControls,
     /// Whether each [`UnsupportedControl`] has been explained in the log yet.
-    warned: [bool; 4],
+    warned: [bool; 5],
     producer: rtrb::Producer<MotionCommand>,
     params: Arc<Params>,
     names: Arc<HashMap<String, u16>>,
     /// The dancer's sets of moves, by name, in order.
     moves: Arc<Vec<String>>,
+    /// Where taps, nudges and clock choices go.
+    clock: Option<ClockDesk>,
     stats: Arc<Stats>,
-    /// Key pose, clear, pause/resume.
-    buckets: [TokenBucket; 3],
+    /// Key pose, clear, pause/resume, the clock's controls.
+    buckets: [TokenBucket; 4],
 }
 
 fn in_range(x: f32, (lo, hi): (f32, f32)) -> bool {
@@ -337,6 +358,7 @@ impl ControlSender {
             Err(
                 ControlRefusal::UnknownPose(_)
                 | ControlRefusal::UnknownMoves(_)
+                | ControlRefusal::UnknownClock(_)
                 | ControlRefusal::OutOfRange,
             ) => &s.controls_rejected,
             Err(ControlRefusal::RateLimited) => &s.controls_rate_limited,
@@ -435,6 +457,12 @@ impl ControlSender {
                 };
                 (0, MotionCommand::KeyPose { pose, quantize })
             }
+            ControlEvent::Tap
+            | ControlEvent::BeatOne
+            | ControlEvent::Nudge(_)
+            | ControlEvent::Clock(_) => {
+                return self.to_clock(event);
+            }
             ControlEvent::ClearKeyPose => (1, MotionCommand::ClearKeyPose),
             ControlEvent::Pause => (2, MotionCommand::Pause),
             ControlEvent::Resume => (2, MotionCommand::Resume),
@@ -445,6 +473,39 @@ impl ControlSender {
         self.producer
             .push(command)
             .map_err(|_| ControlRefusal::QueueFull)
+    }
+}
+
+impl ControlSender {
+    /// Taps, nudges, "beat one" and clock choices: the clock desk's, on this (non-real-time)
+    /// input thread.
+    fn to_clock(&mut self, event: ControlEvent) -> Result<(), ControlRefusal> {
+        if let ControlEvent::Nudge(ms) = event
+            && !(ms.is_finite() && ms.abs() <= NUDGE_MS_MAX)
+        {
+            return Err(ControlRefusal::OutOfRange);
+        }
+        let Some(desk) = &self.clock else {
+            return Err(ControlRefusal::Unsupported(UnsupportedControl::Clock));
+        };
+        if !self.buckets[3].allow(Instant::now()) {
+            return Err(ControlRefusal::RateLimited);
+        }
+        match event {
+            ControlEvent::Tap => desk.tap(),
+            ControlEvent::BeatOne => desk.beat_one(),
+            ControlEvent::Nudge(ms) => desk.nudge(ms),
+            ControlEvent::Clock(name) => {
+                desk.choose(&name).map_err(|e| match e {
+                    ClockRefusal::Unknown(n) => ControlRefusal::UnknownClock(n),
+                    ClockRefusal::Unavailable(_) => {
+                        ControlRefusal::Unsupported(UnsupportedControl::Clock)
+                    }
+                })?;
+            }
+            _ => {}
+        }
+        Ok(())
     }
 }
 

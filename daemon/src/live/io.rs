@@ -15,6 +15,7 @@ use protocols::{
     OscTarget, TargetKind, VmcEncoder, VrchatEncoder, VrchatTrackerMap, parse_target,
 };
 
+use super::clock::{ClockDesk, DriverClock};
 use super::config::Config;
 use super::control_queue::ControlHub;
 use super::sink::{FrameSink, PoseBank, SinkLosses};
@@ -142,7 +143,13 @@ pub struct ControlInputs {
 impl ControlInputs {
     /// Starts the OSC control receiver (`control.osc_port`, 0 = off) and the MIDI input
     /// (`control.midi_port`), each with its own sender from `hub`, until `stop` is set.
-    pub fn start(config: &Config, hub: &mut ControlHub, stop: Arc<AtomicBool>) -> Result<Self> {
+    /// MIDI clock and transport go to `desk` as well.
+    pub fn start(
+        config: &Config,
+        hub: &mut ControlHub,
+        desk: &ClockDesk,
+        stop: Arc<AtomicBool>,
+    ) -> Result<Self> {
         let counters = Arc::new(ControlCounters::default());
         let mut inputs = ControlInputs {
             threads: Vec::new(),
@@ -217,6 +224,8 @@ impl ControlInputs {
                 .with_context(|| format!("opening MIDI input {port:?}"))?;
             inputs.midi_port = Some(connection.port_name().to_string());
             let (mut tx, stop, counters) = (hub.sender(), stop, counters);
+            let desk = desk.clone();
+            let beats_per_bar = config.clock.beats_per_bar;
             inputs.threads.push(
                 std::thread::Builder::new()
                     .name("midi-control".into())
@@ -226,12 +235,25 @@ impl ControlInputs {
                         let mut map = map;
                         let mut parser = MidiParser::default();
                         let mut events = Vec::with_capacity(16);
+                        let mut driver = DriverClock::default();
                         while !stop.load(Ordering::Relaxed) {
                             let Ok(packet) = raw_rx.recv_timeout(Duration::from_millis(50)) else {
+                                // No message: a clock that stopped ticking is let go of.
+                                if let Some(offset) = driver.offset_us() {
+                                    let now = (desk.now_us() - offset).max(0.0) as u64;
+                                    let grid = map.clock().grid(now, beats_per_bar);
+                                    desk.set_midi(grid.map(|g| g.delayed(offset)));
+                                }
                                 continue;
                             };
                             events.clear();
                             map.map_packet(&mut parser, &packet, &mut events);
+                            if is_clock_or_transport(packet.1[0]) {
+                                let stamp = packet.0;
+                                let offset = driver.observe(stamp, desk.now_us()) - stamp as f64;
+                                let grid = map.clock().grid(stamp, beats_per_bar);
+                                desk.set_midi(grid.map(|g| g.delayed(offset)));
+                            }
                             counters
                                 .midi_events
                                 .fetch_add(events.len() as u64, Ordering::Relaxed);
@@ -260,6 +282,12 @@ impl ControlInputs {
             let _ = t.join();
         }
     }
+}
+
+/// Whether a message beginning with `status` is MIDI clock, Start, Continue, Stop or a Song
+/// Position Pointer.
+fn is_clock_or_transport(status: u8) -> bool {
+    matches!(status, 0xf8 | 0xfa | 0xfb | 0xfc | 0xf2)
 }
 
 /// The generic MIDI map, used when `control.midi_port` is set without `control.midi_map`.

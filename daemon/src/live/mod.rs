@@ -5,12 +5,16 @@
 pub mod analysis;
 pub mod beat_clock;
 pub mod capture;
+pub mod clock;
 pub mod config;
 pub mod context;
 pub mod control_queue;
 pub mod devices;
+pub mod grid_steer;
 pub mod input_mix;
 pub mod io;
+pub mod link;
+pub mod midi_clock_out;
 pub mod motion;
 pub mod pipeline;
 pub mod priority;

@@ -9,6 +9,7 @@ use anyhow::{Context, Result, anyhow};
 use model::source::MotionSource;
 
 use super::analysis::{self, AnalysisQueues, AnalysisSettings};
+use super::clock::ClockWiring;
 use super::context::LiveContext;
 use super::control_queue::ControlHub;
 use super::motion::{self, MotionQueues, MotionSettings};
@@ -81,6 +82,8 @@ pub struct PipelineParts {
     /// The control path (its senders already handed to the OSC/MIDI inputs and tests), with
     /// the key poses they resolve names to.
     pub controls: ControlHub,
+    /// The clocks the grid may follow (`None`: the heard beats only).
+    pub clock: Option<ClockWiring>,
 }
 
 /// A running pipeline.
@@ -140,7 +143,12 @@ impl Pipeline {
             source,
             sink,
             controls,
+            clock,
         } = parts;
+        let (clock, led) = match clock {
+            Some(w) => (Some(w.feed), w.led),
+            None => (None, Vec::new()),
+        };
         let motion = {
             let ctx = ctx.clone();
             let s = MotionSettings {
@@ -171,12 +179,15 @@ impl Pipeline {
             let s = AnalysisSettings {
                 model_rate,
                 silence_after_s: settings.silence_after_s,
+                speed: settings.speed,
             };
             let queues = AnalysisQueues {
                 features: features_tx,
                 events: events_tx,
                 anchors: anchors_tx,
                 motion_thread: motion.thread().clone(),
+                clock,
+                led,
             };
             std::thread::Builder::new()
                 .name("danced-analysis".into())

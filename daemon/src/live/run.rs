@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 
 use super::capture::{self, CaptureSettings};
+use super::clock::{ClockDesk, ClockSettings, ClockSource, ClockWiring};
 use super::config::Config;
 use super::context::LiveContext;
 use super::control_queue::ControlHub;
@@ -107,10 +108,22 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     let osc = OscSink::from_config(config)?;
     let targets = osc.describe();
     let _ = ctx.stats.moves_names.set(moves.clone());
+    let (desk, feed) = ClockDesk::new(
+        ClockSettings {
+            source: config.clock.source(),
+            beats_per_bar: config.clock.beats_per_bar,
+            trim: config.clock.trim,
+            midi: config.control.midi_port.is_some(),
+            link: config.clock.link,
+        },
+        ctx.epoch,
+    );
+    let (clock, clock_threads) = start_clocks(config, &desk, feed, &ctx)?;
     let mut hub = ControlHub::new(&poses, ctx.stats.clone())
         .honouring(source.controls())
-        .with_moves(moves.clone());
-    let controls = ControlInputs::start(config, &mut hub, ctx.stop.clone())?;
+        .with_moves(moves.clone())
+        .with_clock(desk.clone());
+    let controls = ControlInputs::start(config, &mut hub, &desk, ctx.stop.clone())?;
     let mut sink: Box<dyn FrameSink> = Box::new(osc);
     let view = if config.view.enabled {
         let hello = ViewHello {
@@ -170,6 +183,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             source,
             sink,
             controls: hub,
+            clock: Some(clock),
         },
         reader,
     )?;
@@ -193,6 +207,12 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
         }
         if let Some(p) = &controls.midi_port {
             eprintln!("MIDI control from {p}");
+        }
+        if config.clock.source() != ClockSource::Audio {
+            eprintln!("beat grid from the {} clock", config.clock.source().name());
+        }
+        if config.clock.link {
+            eprintln!("joined the Link session on every network interface");
         }
     }
     let started = Instant::now();
@@ -224,6 +244,11 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     report.view = view.map(ViewServer::stop);
     let counters = controls.counters.clone();
     controls.join();
+    for t in clock_threads {
+        if t.join().is_err() {
+            bail!("a clock thread panicked");
+        }
+    }
     report.osc_control_accepted = counters.osc_accepted.load(Ordering::Relaxed);
     report.osc_control_ignored = counters.osc_ignored.load(Ordering::Relaxed);
     report.midi_events = counters.midi_events.load(Ordering::Relaxed);
@@ -242,6 +267,43 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(report)
+}
+
+/// The clocks danced leads (MIDI clock out, Link), each a thread fed the grid followed; and
+/// the analysis thread's ends.
+fn start_clocks(
+    config: &Config,
+    desk: &ClockDesk,
+    feed: triple_buffer::Output<super::clock::ClockSnapshot>,
+    ctx: &LiveContext,
+) -> Result<(ClockWiring, Vec<std::thread::JoinHandle<()>>)> {
+    let mut led = Vec::new();
+    let mut threads = Vec::new();
+    if let Some(port) = &config.clock.midi_out {
+        let out = protocols::MidiOutConnection::connect(port)
+            .with_context(|| format!("opening MIDI output {port:?} for the clock"))?;
+        let (input, output) = triple_buffer::triple_buffer(&None);
+        led.push(input);
+        threads.push(
+            super::midi_clock_out::spawn(Box::new(out), output, ctx, config.output.realtime)
+                .context("starting the MIDI clock thread")?,
+        );
+    }
+    if config.clock.link {
+        #[cfg(feature = "link")]
+        {
+            let (input, output) = triple_buffer::triple_buffer(&None);
+            led.push(input);
+            threads.push(
+                super::link::spawn(desk.clone(), output, ctx)
+                    .context("starting the Link thread")?,
+            );
+        }
+        #[cfg(not(feature = "link"))]
+        bail!("this build has no Ableton Link (build with --features link)");
+    }
+    let _ = desk;
+    Ok((ClockWiring { feed, led }, threads))
 }
 
 fn replay_settings(config: &Config, looped: bool) -> ReplaySettings {
@@ -264,12 +326,13 @@ pub fn summary(r: &StatsReport) -> String {
          jitter       p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms (frame spacing − period, at send_to)\n\
          cpu          {:.1} % of one core, {} threads at real-time priority\n\
          memory       RSS start {:.1} MiB, end {:.1} MiB, max {:.1} MiB (first minute max {:.1}, last minute max {:.1})\n\
-         allocations  capture {}, analysis {}, motion {}, sender {}{}\n\
+         allocations  capture {}, analysis {}, motion {}, sender {}, MIDI clock {}{}\n\
          audio        {} frames dropped, {} stream errors, {} stalls, {} reconnects ({} failed tries), {} blocks contended, {} old streams stuck, {} frames of silence inserted\n\
          queues       {} feature frames, {} clock anchors, {} poses, {} events dropped\n\
          packets      {} sent, {} send errors, {} non-finite values replaced, {} VRChat trackers without a bone\n\
          controls     {} applied, {} rejected, {} not honoured by the dancer, {} coalesced, {} rate-limited, {} dropped (queue full)\n\
-         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full){}{}{}{}",
+         control in   OSC {} accepted, {} ignored, {} from refused sources; MIDI {} events, {} bytes dropped, {} skipped, {} lost (queue full)\n\
+         clock        {}{}{}{}{}",
         r.wall_s,
         r.frames_sent,
         r.frames_sent as f64 / r.wall_s.max(1e-9),
@@ -300,6 +363,7 @@ pub fn summary(r: &StatsReport) -> String {
         a.analysis,
         a.motion,
         a.sender,
+        a.clock_out,
         if r.allocation_counting {
             ""
         } else {
@@ -334,6 +398,7 @@ pub fn summary(r: &StatsReport) -> String {
         r.midi_bytes_dropped,
         r.midi_skipped,
         r.midi_queue_full,
+        clock_summary(&r.clock),
         r.safety_nets
             .map(|c| format!("\nsafety nets  {}", c.summary()))
             .unwrap_or_default(),
@@ -350,6 +415,26 @@ pub fn summary(r: &StatsReport) -> String {
         r.view
             .map(|v| view_summary(&v, r.wall_s))
             .unwrap_or_default(),
+    )
+}
+
+/// The clock's line of the summary.
+fn clock_summary(c: &super::stats::ClockReport) -> String {
+    let offset = c
+        .offset_ms
+        .map(|o| format!(", heard {o:+.1} ms from it"))
+        .unwrap_or_default();
+    format!(
+        "{} at {:.1} BPM{offset}, trimmed {:+.1} ms, nudged {:+.1} ms, {} frames on the heard beats for want of it, {} Link peers; MIDI clock out {} ticks, {} skipped, {} refused",
+        c.source,
+        c.tempo_bpm,
+        c.trim_ms,
+        c.nudge_ms,
+        c.fallback_frames,
+        c.peers,
+        c.midi_ticks_sent,
+        c.midi_ticks_skipped,
+        c.midi_send_errors,
     )
 }
 

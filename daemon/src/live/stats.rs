@@ -40,6 +40,8 @@ pub struct ThreadAllocations {
     pub motion: u64,
     /// The sender thread's loop.
     pub sender: u64,
+    /// The MIDI clock sender's loop.
+    pub clock_out: u64,
 }
 
 impl ThreadAllocations {
@@ -51,12 +53,13 @@ impl ThreadAllocations {
             analysis: allocations(RtThread::Analysis),
             motion: allocations(RtThread::Motion),
             sender: allocations(RtThread::Sender),
+            clock_out: allocations(RtThread::ClockOut),
         }
     }
 
     /// All threads together.
     pub fn total(&self) -> u64 {
-        self.capture + self.analysis + self.motion + self.sender
+        self.capture + self.analysis + self.motion + self.sender + self.clock_out
     }
 }
 
@@ -254,6 +257,8 @@ pub struct Stats {
     pub moves: AtomicU32,
     /// Switches of the set of moves made.
     pub moves_switches: AtomicU64,
+    /// The clock the beat grid follows.
+    pub clock: ClockGauges,
     rss: Mutex<Vec<(f64, u64)>>,
 }
 
@@ -312,6 +317,7 @@ impl Stats {
             moves_names: std::sync::OnceLock::new(),
             moves: AtomicU32::new(0),
             moves_switches: AtomicU64::new(0),
+            clock: ClockGauges::default(),
             paused: AtomicU32::new(0),
             style: AtomicU32::new(0),
             style_auto: AtomicU32::new(1),
@@ -455,11 +461,116 @@ impl Stats {
             stage: self.stage.load(),
             moves: self.moves_danced().map(str::to_owned),
             moves_switches: load(&self.moves_switches),
+            clock: self.clock.report(),
             style: self.style_danced().map(|s| s.name()),
             key_route: self.key_route().map(|r| r.name()),
             view: None,
         }
     }
+}
+
+/// The clock the beat grid follows, as the analysis thread last chose it, and what the MIDI
+/// clock leader sent.
+#[derive(Debug)]
+pub struct ClockGauges {
+    /// The [`ClockSource`](super::clock::ClockSource)'s number.
+    pub source: AtomicU32,
+    /// Tempo of the grid followed, BPM (0 while none is).
+    pub tempo_bpm: AtomicF32,
+    /// Median offset of the heard beats from an external clock's, ms (NaN: not measured).
+    pub offset_ms: AtomicF32,
+    /// How far the external clock's phase is trimmed toward the heard beats, ms.
+    pub trim_ms: AtomicF32,
+    /// The nudges added up, ms.
+    pub nudge_ms: AtomicF32,
+    /// Feature frames on which the chosen external clock had no grid (the heard beats stood in).
+    pub fallback_frames: AtomicU64,
+    /// Link peers.
+    pub peers: AtomicU32,
+    /// MIDI clock ticks sent.
+    pub midi_ticks_sent: AtomicU64,
+    /// MIDI clock ticks skipped because the grid jumped past them.
+    pub midi_ticks_skipped: AtomicU64,
+    /// MIDI clock messages the output port refused.
+    pub midi_send_errors: AtomicU64,
+}
+
+impl Default for ClockGauges {
+    fn default() -> Self {
+        let nan = AtomicF32::default();
+        nan.set(f32::NAN);
+        Self {
+            source: AtomicU32::new(0),
+            tempo_bpm: AtomicF32::default(),
+            offset_ms: nan,
+            trim_ms: AtomicF32::default(),
+            nudge_ms: AtomicF32::default(),
+            fallback_frames: AtomicU64::new(0),
+            peers: AtomicU32::new(0),
+            midi_ticks_sent: AtomicU64::new(0),
+            midi_ticks_skipped: AtomicU64::new(0),
+            midi_send_errors: AtomicU64::new(0),
+        }
+    }
+}
+
+impl ClockGauges {
+    /// The clock followed, by name.
+    pub fn source(&self) -> super::clock::ClockSource {
+        let i = self.source.load(Ordering::Relaxed) as usize;
+        super::clock::ClockSource::ALL
+            .get(i)
+            .copied()
+            .unwrap_or_default()
+    }
+
+    /// The offset, when measured.
+    pub fn offset(&self) -> Option<f32> {
+        Some(self.offset_ms.get()).filter(|x| x.is_finite())
+    }
+
+    /// What the run's summary says of the clock.
+    pub fn report(&self) -> ClockReport {
+        let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        ClockReport {
+            source: self.source().name(),
+            tempo_bpm: self.tempo_bpm.get(),
+            offset_ms: self.offset(),
+            trim_ms: self.trim_ms.get(),
+            nudge_ms: self.nudge_ms.get(),
+            fallback_frames: load(&self.fallback_frames),
+            peers: self.peers.load(Ordering::Relaxed),
+            midi_ticks_sent: load(&self.midi_ticks_sent),
+            midi_ticks_skipped: load(&self.midi_ticks_skipped),
+            midi_send_errors: load(&self.midi_send_errors),
+        }
+    }
+}
+
+/// The clock in a run's summary ([`ClockGauges`] at the end).
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct ClockReport {
+    /// `audio`, `midi`, `link` or `tap`.
+    pub source: &'static str,
+    /// Tempo of the grid followed, BPM.
+    pub tempo_bpm: f32,
+    /// Median offset of the heard beats from an external clock's, ms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub offset_ms: Option<f32>,
+    /// Trim of the external clock's phase, ms.
+    pub trim_ms: f32,
+    /// The nudges added up, ms.
+    pub nudge_ms: f32,
+    /// Feature frames the chosen external clock had no grid for.
+    pub fallback_frames: u64,
+    /// Link peers.
+    pub peers: u32,
+    /// MIDI clock ticks sent.
+    pub midi_ticks_sent: u64,
+    /// MIDI clock ticks skipped.
+    pub midi_ticks_skipped: u64,
+    /// MIDI clock messages the output port refused.
+    pub midi_send_errors: u64,
 }
 
 /// The dancer's [`SafetyCounts`], published by the motion thread after each step.
@@ -676,6 +787,8 @@ pub struct StatsReport {
     pub moves: Option<String>,
     /// Switches of the set of moves made.
     pub moves_switches: u64,
+    /// The clock the beat grid followed.
+    pub clock: ClockReport,
     /// The style danced at the end (sources with a style input only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub style: Option<&'static str>,

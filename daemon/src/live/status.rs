@@ -36,8 +36,31 @@ pub fn status_line(stats: &Stats) -> String {
         .moves_danced()
         .map(|m| format!(" | moves {m}"))
         .unwrap_or_default();
+    let c = &stats.clock;
+    let clock = match c.source() {
+        super::clock::ClockSource::Audio => String::new(),
+        source => {
+            let offset = c
+                .offset()
+                .map(|o| format!(", heard {o:+.0} ms"))
+                .unwrap_or_default();
+            let peers = match c.peers.load(Ordering::Relaxed) {
+                0 => String::new(),
+                n => format!(", {n} peers"),
+            };
+            format!(
+                " | {} clock {:.1} BPM{offset}{peers}",
+                source.name(),
+                c.tempo_bpm.get()
+            )
+        }
+    };
+    let nudge = match c.nudge_ms.get() {
+        n if n != 0.0 => format!(" | nudged {n:+.0} ms"),
+        _ => String::new(),
+    };
     format!(
-        "tempo {:5.1} BPM | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | style {style}{moves} | key pose {key} ({route}) | drops {} | packets {}{paused}",
+        "tempo {:5.1} BPM{clock}{nudge} | beat {:.2} | latency p99 {:5.1} ms | temp {:.2} | accent {accent} | style {style}{moves} | key pose {key} ({route}) | drops {} | packets {}{paused}",
         stats.tempo_bpm.get(),
         stats.beat_phase.get(),
         stats.latency.quantile_ms(0.99),
