@@ -65,17 +65,26 @@ fn lag_ms(kind: SourceKind, lead_ms: f64, audio: &ReplayAudio) -> f64 {
         "{} frames",
         e.frames
     );
-    // One clock: each beat message arrives within a 60 Hz tick (and a loaded machine's slack)
-    // of the dancer showing that beat.
+    // One clock, and beats sent when the dancer shows them, not at the next 60 Hz frame:
+    // each beat message arrives within a few ms (and a loaded machine's slack) of the
+    // dancer's beat; the median within 2 ms (it was 3.3 ms when beats waited for a frame).
     let delays = &live.beat_message_delays_s;
     assert!(delays.len() >= 8, "{} beat messages", delays.len());
     for d in delays {
         assert!(
-            (-0.001..=0.020 + 0.02).contains(d),
+            (-0.001..=0.005 + 0.02).contains(d),
             "beat message {:.1} ms after the dancer's beat",
             d * 1e3
         );
     }
+    let mut sorted = delays.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    assert!(
+        median <= 0.002,
+        "beat messages {:.1} ms after the dancer's beat (median)",
+        median * 1e3
+    );
     e.lag_s * 1e3
 }
 

@@ -2,7 +2,9 @@
 //! time to show — the music heard now, plus the output lead (which cancels a renderer's display
 //! latency) — interpolates the poses around it (made ahead of time from predicted music),
 //! builds a [`BodyFrame`](super::wire::BodyFrame) in Unity coordinates stamped with when it should be shown, and hands
-//! it to the sink with the beats it crossed ([`BeatClock`]) and any pending analysis events.
+//! it to the sink with any pending analysis events. A beat ([`BeatClock`]) goes out when the
+//! shown time reaches it: the thread wakes for it between frames, so a receiver triggering on
+//! `/danced/beat` is not a frame period late.
 
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -82,11 +84,21 @@ pub fn run(
     let mut pose = Pose::rest();
     let mut index = 0u64;
     let mut last_t = f64::NEG_INFINITY;
+    // Shown time up to which beats have gone out, and the next beat due before the next frame.
+    let mut beats_until = f64::NEG_INFINITY;
+    let mut due_beat: Option<(Instant, f64, dsp::BeatGrid)> = None;
     let mut last_sent: Option<Instant> = None;
     sink.prepare(builder.build(0, 0.0, &pose, 0.0));
     let mut deadline = Instant::now() + period;
     let _counting = CountGuard::new(RtThread::Sender);
     while !stop.load(Ordering::Relaxed) {
+        if let Some((at, beat_s, grid)) = due_beat.take() {
+            wait_until(at);
+            beats.advance(&grid, beats_until, beat_s, settings.speed, |e| {
+                sink.send_event(&e)
+            });
+            beats_until = beats_until.max(beat_s);
+        }
         wait_until(deadline);
         let woke = Instant::now();
         while let Ok(a) = queues.anchors.pop() {
@@ -114,8 +126,20 @@ pub fn run(
         if let Some((t, late, ingest_ns, grid)) = picked {
             let frame = builder.build(index, t, &pose, lead_s);
             sink.send_frame(frame);
-            beats.advance(&grid, last_t, t, settings.speed, |e| sink.send_event(&e));
+            beats.advance(&grid, beats_until, t, settings.speed, |e| {
+                sink.send_event(&e)
+            });
+            beats_until = beats_until.max(t);
             last_t = t;
+            // The next beat, if the shown time reaches it before the next frame: sent then.
+            if let Some(b) = grid.beat_after(beats_until) {
+                let wait_s = ((b.time_s - t) / settings.speed).max(0.0);
+                let at = woke + Duration::from_secs_f64(wait_s.min(1.0));
+                if at < deadline + period {
+                    // Just past the beat, so the clock counts it crossed.
+                    due_beat = Some((at, b.time_s + 1e-9, grid));
+                }
+            }
             // Stamped when the last send_to has returned: what a receiver can see.
             let sent = Instant::now();
             let done_ns = sent.duration_since(epoch).as_nanos() as u64;
