@@ -25,6 +25,10 @@ const CHANGE_US: f64 = 3_000.0;
 /// Ticks kept after a tempo change is detected (the fit needs two).
 const AFTER_CHANGE: usize = 3;
 
+/// Ticks the line must run through before a tick off it counts as a tempo change: fewer
+/// predict the next tick no better than the jitter.
+const CHANGE_AFTER_TICKS: usize = 12;
+
 /// Follows an incoming MIDI clock: a straight line through the last ticks' timestamps gives
 /// the tempo and where each tick (so each beat) falls; Start (the next tick is the song's
 /// first beat) or Song Position Pointer then Continue give the beat count, so the bar.
@@ -152,7 +156,7 @@ impl MidiClockFollower {
             // Out-of-order or long-gap ticks start a fresh measurement rather than poison it.
             self.forget_ticks();
         }
-        if self.count >= 3
+        if self.count >= CHANGE_AFTER_TICKS
             && let Some((newest_fit, slope)) = self.fit()
         {
             let expected = newest_fit + slope;

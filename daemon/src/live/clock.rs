@@ -119,6 +119,50 @@ impl DriverClock {
     }
 }
 
+/// The MIDI input thread's part in following an incoming MIDI clock: after each message the
+/// map has read, the clock's grid goes to the desk on the run's clock.
+#[derive(Clone, Copy, Debug)]
+pub struct MidiClockInput {
+    driver: DriverClock,
+    beats_per_bar: u32,
+}
+
+impl MidiClockInput {
+    /// For bars of `beats_per_bar`.
+    pub fn new(beats_per_bar: u32) -> Self {
+        Self {
+            driver: DriverClock::default(),
+            beats_per_bar,
+        }
+    }
+
+    /// `map` has just read a packet stamped `stamp_us` (driver clock) whose first byte is
+    /// `status`: clock and transport messages update the desk.
+    pub fn packet(
+        &mut self,
+        map: &protocols::MidiMap,
+        status: u8,
+        stamp_us: u64,
+        desk: &ClockDesk,
+    ) {
+        if !matches!(status, 0xf8 | 0xfa | 0xfb | 0xfc | 0xf2) {
+            return;
+        }
+        let offset = self.driver.observe(stamp_us, desk.now_us()) - stamp_us as f64;
+        let grid = map.clock().grid(stamp_us, self.beats_per_bar);
+        desk.set_midi(grid.map(|g| g.delayed(offset)));
+    }
+
+    /// No message for a while: a clock that stopped ticking is let go of.
+    pub fn idle(&mut self, map: &protocols::MidiMap, desk: &ClockDesk) {
+        if let Some(offset) = self.driver.offset_us() {
+            let now = (desk.now_us() - offset).max(0.0) as u64;
+            let grid = map.clock().grid(now, self.beats_per_bar);
+            desk.set_midi(grid.map(|g| g.delayed(offset)));
+        }
+    }
+}
+
 /// Nudges add up to at most this, ms either way.
 pub const NUDGE_TOTAL_MS_MAX: f32 = 1000.0;
 

@@ -15,7 +15,7 @@ use protocols::{
     OscTarget, TargetKind, VmcEncoder, VrchatEncoder, VrchatTrackerMap, parse_target,
 };
 
-use super::clock::{ClockDesk, DriverClock};
+use super::clock::{ClockDesk, MidiClockInput};
 use super::config::Config;
 use super::control_queue::ControlHub;
 use super::sink::{FrameSink, PoseBank, SinkLosses};
@@ -235,25 +235,15 @@ impl ControlInputs {
                         let mut map = map;
                         let mut parser = MidiParser::default();
                         let mut events = Vec::with_capacity(16);
-                        let mut driver = DriverClock::default();
+                        let mut clock = MidiClockInput::new(beats_per_bar);
                         while !stop.load(Ordering::Relaxed) {
                             let Ok(packet) = raw_rx.recv_timeout(Duration::from_millis(50)) else {
-                                // No message: a clock that stopped ticking is let go of.
-                                if let Some(offset) = driver.offset_us() {
-                                    let now = (desk.now_us() - offset).max(0.0) as u64;
-                                    let grid = map.clock().grid(now, beats_per_bar);
-                                    desk.set_midi(grid.map(|g| g.delayed(offset)));
-                                }
+                                clock.idle(&map, &desk);
                                 continue;
                             };
                             events.clear();
                             map.map_packet(&mut parser, &packet, &mut events);
-                            if is_clock_or_transport(packet.1[0]) {
-                                let stamp = packet.0;
-                                let offset = driver.observe(stamp, desk.now_us()) - stamp as f64;
-                                let grid = map.clock().grid(stamp, beats_per_bar);
-                                desk.set_midi(grid.map(|g| g.delayed(offset)));
-                            }
+                            clock.packet(&map, packet.1[0], packet.0, &desk);
                             counters
                                 .midi_events
                                 .fetch_add(events.len() as u64, Ordering::Relaxed);
@@ -282,12 +272,6 @@ impl ControlInputs {
             let _ = t.join();
         }
     }
-}
-
-/// Whether a message beginning with `status` is MIDI clock, Start, Continue, Stop or a Song
-/// Position Pointer.
-fn is_clock_or_transport(status: u8) -> bool {
-    matches!(status, 0xf8 | 0xfa | 0xfb | 0xfc | 0xf2)
 }
 
 /// The generic MIDI map, used when `control.midi_port` is set without `control.midi_map`.
