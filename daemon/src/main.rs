@@ -7,6 +7,7 @@ use tracing_subscriber::EnvFilter;
 
 use daemon::command::analyze::{AnalyzeArgs, analyze};
 use daemon::command::bench_beats::{BenchBeatsArgs, bench_beats};
+use daemon::command::bench_clock::{BenchClockArgs, bench_clock};
 use daemon::command::bench_cues::{BenchCuesArgs, bench_cues};
 use daemon::command::bench_lag::{BenchLagArgs, bench_lag};
 use daemon::command::bench_live::{BenchLiveArgs, bench_live};
@@ -64,7 +65,7 @@ enum Command {
     /// features, freezes, foot skating).
     Metrics(MetricsArgs),
     /// Dance live to the sound card (or a replayed file) and send the motion.
-    Run(RunArgs),
+    Run(Box<RunArgs>),
     /// Dance live to the built-in demo song (no sound card, no files needed).
     Demo(DemoArgs),
     /// List the audio inputs.
@@ -103,6 +104,9 @@ enum BenchCommand {
     Moves(BenchMovesArgs),
     /// The beat grid found from each tang2018 dance's motion alone against its music's beats.
     MotionBeats(BenchMotionBeatsArgs),
+    /// The show's clock: MIDI clock followed and sent; Link followed and led (builds with
+    /// Link, in a network namespace of its own).
+    Clock(BenchClockArgs),
 }
 
 fn main() -> Result<()> {
@@ -126,12 +130,13 @@ fn main() -> Result<()> {
             BenchCommand::Stage(args) => bench_stage(args),
             BenchCommand::Moves(args) => bench_moves(args),
             BenchCommand::MotionBeats(args) => bench_motion_beats(args),
+            BenchCommand::Clock(args) => bench_clock(args),
         },
         Command::Generate(args) => generate(&args),
         Command::View(args) => view(&args),
         Command::Bvh(args) => bvh_export(&args),
         Command::Metrics(args) => metrics(&args),
-        Command::Run(args) => run(args),
+        Command::Run(args) => run(*args),
         Command::Demo(args) => demo(args),
         Command::Devices => devices(),
         Command::Dataset { what } => dataset(what),

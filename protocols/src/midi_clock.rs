@@ -14,9 +14,9 @@ pub const TICKS_PER_SIXTEENTH: u64 = 6;
 /// A silence between ticks longer than this (µs) means the clock stopped.
 pub const MAX_TICK_GAP_US: u64 = 1_000_000;
 
-/// Ticks the line is fitted through: two beats, so 1 ms of timestamp jitter moves the tempo
+/// Ticks the line is fitted through: four beats, so 1 ms of timestamp jitter moves the tempo
 /// by a few hundredths of a BPM and the phase by a tenth of a millisecond.
-const HISTORY: usize = 2 * TICKS_PER_BEAT;
+const HISTORY: usize = 4 * TICKS_PER_BEAT;
 
 /// A tick this far (µs) from where the fitted line puts it, twice in a row, means the tempo
 /// changed: the fit restarts from the newest ticks instead of averaging over the change.

@@ -315,6 +315,7 @@ fn events() -> Vec<AnalysisEvent> {
             time_s: 1.0,
             db: -3.0,
         },
+        AnalysisEvent::ClockOffset { ms: 4.5 },
     ];
     // A new kind of event fails to compile here: add it above, and to the reference.
     for e in &events {
@@ -325,7 +326,8 @@ fn events() -> Vec<AnalysisEvent> {
             | AnalysisEvent::Tempo { .. }
             | AnalysisEvent::Chroma { .. }
             | AnalysisEvent::Energy { .. }
-            | AnalysisEvent::RelativeLevel { .. } => {}
+            | AnalysisEvent::RelativeLevel { .. }
+            | AnalysisEvent::ClockOffset { .. } => {}
         }
     }
     events

@@ -111,6 +111,23 @@ fn controller(port: u16, stop: Arc<AtomicBool>) -> JoinHandle<u64> {
                 );
                 sent += 1;
             }
+            // The clock: taps every 0.48 s (125 BPM), nudges, beat one, and the grid switched
+            // between the tapped beats and the heard ones.
+            if i.is_multiple_of(12) {
+                send("tap", vec![]);
+                sent += 1;
+            }
+            if i.is_multiple_of(75) {
+                let ms = if (i / 75) % 2 == 0 { 5.0 } else { -5.0 };
+                send("clock/nudge", vec![OscType::Float(ms)]);
+                send("clock/one", vec![]);
+                sent += 2;
+            }
+            if i.is_multiple_of(125) {
+                let which = if (i / 125) % 2 == 1 { "tap" } else { "audio" };
+                send("clock", vec![OscType::String(which.into())]);
+                sent += 1;
+            }
             if i.is_multiple_of(150) {
                 send("pause", vec![]);
                 send("resume", vec![]);
@@ -174,6 +191,15 @@ fn live_run(source: &'static str) -> JoinHandle<LiveRun> {
 }
 
 #[test]
+fn the_midi_clock_sender_allocates_nothing_while_it_ticks() {
+    alloc_counter::mark_installed();
+    let before = alloc_counter::allocations(RtThread::ClockOut);
+    let row = daemon::bench::clock::midi_clock_out(150.0, 3.0, false).unwrap();
+    assert!(row.ticks >= 150, "{row:?}");
+    assert_eq!(alloc_counter::allocations(RtThread::ClockOut) - before, 0);
+}
+
+#[test]
 fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_traffic() {
     alloc_counter::mark_installed();
     // First: the counter counts. A deliberate allocation in each thread's role is seen.
@@ -183,6 +209,7 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
         RtThread::Analysis,
         RtThread::Motion,
         RtThread::Sender,
+        RtThread::ClockOut,
     ] {
         alloc_counter::counted(role, || {
             std::hint::black_box(Vec::<u8>::with_capacity(10));
@@ -196,6 +223,7 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
         (before.analysis, after.analysis),
         (before.motion, after.motion),
         (before.sender, after.sender),
+        (before.clock_out, after.clock_out),
     ] {
         assert_eq!(a - b, 2, "one allocation and its free, counted once each");
     }
@@ -208,6 +236,7 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
         analysis: counted.analysis - after.analysis,
         motion: counted.motion - after.motion,
         sender: counted.sender - after.sender,
+        clock_out: counted.clock_out - after.clock_out,
     };
     for (run, source) in runs.iter().zip(["neural", "retrieval"]) {
         let r = &run.report;
@@ -267,6 +296,8 @@ fn no_real_time_thread_allocates_in_a_live_run_with_every_output_and_control_tra
         // The view took the frames (no browser connected: taken from the slot, not sent).
         let view = r.view.expect("the view ran");
         assert_eq!(view.events_dropped, 0, "{view:?}");
+        // The clock controls reached the grid: a tapped tempo followed at times.
+        assert!(r.clock.tempo_bpm > 0.0, "{:?}", r.clock);
         // The control traffic went through the real path.
         assert!(r.osc_control_accepted > run.control_sent / 2, "{r:?}");
         assert!(

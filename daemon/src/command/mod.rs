@@ -2,6 +2,7 @@
 
 pub mod analyze;
 pub mod bench_beats;
+pub mod bench_clock;
 pub mod bench_cues;
 pub mod bench_lag;
 pub mod bench_live;

@@ -461,7 +461,7 @@ impl ControlSender {
             | ControlEvent::BeatOne
             | ControlEvent::Nudge(_)
             | ControlEvent::Clock(_) => {
-                return self.to_clock(event);
+                return self.pass_to_clock(event);
             }
             ControlEvent::ClearKeyPose => (1, MotionCommand::ClearKeyPose),
             ControlEvent::Pause => (2, MotionCommand::Pause),
@@ -479,7 +479,7 @@ impl ControlSender {
 impl ControlSender {
     /// Taps, nudges, "beat one" and clock choices: the clock desk's, on this (non-real-time)
     /// input thread.
-    fn to_clock(&mut self, event: ControlEvent) -> Result<(), ControlRefusal> {
+    fn pass_to_clock(&mut self, event: ControlEvent) -> Result<(), ControlRefusal> {
         if let ControlEvent::Nudge(ms) = event
             && !(ms.is_finite() && ms.abs() <= NUDGE_MS_MAX)
         {

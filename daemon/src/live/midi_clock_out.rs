@@ -13,7 +13,7 @@ use super::context::LiveContext;
 use crate::alloc_counter::{CountGuard, RtThread};
 
 /// How long before a message is due the thread stops sleeping and spins.
-const SPIN_BEFORE_US: f64 = 500.0;
+const SPIN_BEFORE_US: f64 = 1500.0;
 /// Longest nap between looks at the grid, µs (a new grid is seen within this).
 const MAX_NAP_US: f64 = 5_000.0;
 

@@ -108,16 +108,7 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     let osc = OscSink::from_config(config)?;
     let targets = osc.describe();
     let _ = ctx.stats.moves_names.set(moves.clone());
-    let (desk, feed) = ClockDesk::new(
-        ClockSettings {
-            source: config.clock.source(),
-            beats_per_bar: config.clock.beats_per_bar,
-            trim: config.clock.trim,
-            midi: config.control.midi_port.is_some(),
-            link: config.clock.link,
-        },
-        ctx.epoch,
-    );
+    let (desk, feed) = ClockDesk::new(clock_settings(config), ctx.epoch);
     let (clock, clock_threads) = start_clocks(config, &desk, feed, &ctx)?;
     let mut hub = ControlHub::new(&poses, ctx.stats.clone())
         .honouring(source.controls())
@@ -269,9 +260,20 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
     Ok(report)
 }
 
+/// The clock desk's settings from `config`.
+pub fn clock_settings(config: &Config) -> ClockSettings {
+    ClockSettings {
+        source: config.clock.source(),
+        beats_per_bar: config.clock.beats_per_bar,
+        trim: config.clock.trim,
+        midi: config.control.midi_port.is_some(),
+        link: config.clock.link,
+    }
+}
+
 /// The clocks danced leads (MIDI clock out, Link), each a thread fed the grid followed; and
 /// the analysis thread's ends.
-fn start_clocks(
+pub fn start_clocks(
     config: &Config,
     desk: &ClockDesk,
     feed: triple_buffer::Output<super::clock::ClockSnapshot>,
