@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+use daemon::live::clock::{ClockDesk, ClockSettings, ClockSource, ClockWiring};
 use daemon::live::context::LiveContext;
 use daemon::live::control_queue::ControlHub;
 use daemon::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
@@ -99,7 +100,10 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
     let ctx = LiveContext::new();
     let (writer, reader) = ctx.ring();
     let moves = vec!["first".to_string(), "second".to_string()];
-    let mut hub = ControlHub::new(&bank, ctx.stats.clone()).with_moves(moves.clone());
+    let (desk, clock_feed) = ClockDesk::new(ClockSettings::default(), ctx.epoch);
+    let mut hub = ControlHub::new(&bank, ctx.stats.clone())
+        .with_moves(moves.clone())
+        .with_clock(desk);
     let poses = hub.pose_names();
     let feed = LiveFeed {
         stats: ctx.stats.clone(),
@@ -112,6 +116,7 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
         rate_hz: 60.0,
         model_rate_hz: 25.0,
         moves,
+        clocks: vec!["audio", "tap"],
         ..ViewHello::default()
     };
     let (server, sink) = ViewServer::start(
@@ -132,7 +137,10 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
             source: Box::new(PoseHolder { pose: Pose::rest() }),
             sink: Box::new(sink.unwrap()),
             controls: hub,
-            clock: None,
+            clock: Some(ClockWiring {
+                feed: clock_feed,
+                led: Vec::new(),
+            }),
         },
         reader,
     )
@@ -253,6 +261,32 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
     assert_eq!(applied, 8, "controls applied");
     assert_eq!(server.report().controls_accepted, 8);
     assert_eq!(server.report().controls_ignored, 0);
+
+    // The clock: four taps 0.4 s apart (150 BPM), the tap clock chosen, beat one, a nudge
+    // later; the HUD names the clock followed.
+    page.eval(
+        "(async () => { const t = document.getElementById('tap'); \
+           for (let i = 0; i < 4; i++) { t.dispatchEvent(new Event('pointerdown')); \
+             await new Promise((r) => setTimeout(r, 400)); } \
+           const c = document.getElementById('clockSelect'); c.value = 'tap'; \
+           c.dispatchEvent(new Event('change')); \
+           document.getElementById('one').click(); document.getElementById('later').click(); })(); true",
+    )
+    .unwrap();
+    let followed = testkit::wait_until(Duration::from_secs(20), || {
+        let c = &ctx.stats.clock;
+        c.source() == ClockSource::Tap
+            && c.nudge_ms.get() == 10.0
+            && (c.tempo_bpm.get() - 150.0).abs() < 3.0
+    });
+    assert!(followed, "{:?}", ctx.stats.clock.report());
+    let hud = page.wait_for(
+        "document.getElementById('clock').textContent.startsWith('tap 1') \
+         && document.getElementById('clock').textContent.includes('nudged +10 ms') \
+         && document.getElementById('clockSelect').options.length === 2",
+        Duration::from_secs(10),
+    );
+    assert!(hud.is_ok(), "{:?}", page.eval("document.getElementById('clock').textContent"));
 
     let png = page.screenshot_png().unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");

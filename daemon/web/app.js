@@ -234,7 +234,9 @@ function showBeat(index, perBar, bpm, barConfidence) {
 
 function showStatus(s) {
   state.status = s;
-  if (s.tempo_bpm > 0) $('tempo').textContent = s.tempo_bpm.toFixed(1);
+  // The tempo the dancer follows: the clock's when one is followed, else the one heard.
+  const tempo = s.clock_tempo_bpm > 0 ? s.clock_tempo_bpm : s.tempo_bpm;
+  if (tempo > 0) $('tempo').textContent = tempo.toFixed(1);
   $('temp').textContent = s.temperature.toFixed(2);
   $('accent').textContent = s.accent == null ? '–' : s.accent.toFixed(2);
   // The style danced, and whether the music chose it (auto); none for a dancer without styles.
@@ -244,6 +246,16 @@ function showStatus(s) {
   // The set of moves danced (none for a dancer with one).
   $('moves').textContent = s.moves ?? '–';
   if (s.moves && document.activeElement !== $('movesSelect')) $('movesSelect').value = s.moves;
+  // The clock followed, its tempo, how far the music is heard from it, the nudges.
+  if (s.clock) {
+    let c = s.clock;
+    if (s.clock !== 'audio' && s.clock_tempo_bpm > 0) c += ` ${s.clock_tempo_bpm.toFixed(1)} BPM`;
+    if (s.clock_offset_ms != null) c += `, heard ${s.clock_offset_ms >= 0 ? '+' : ''}${s.clock_offset_ms.toFixed(0)} ms`;
+    if (s.peers) c += `, ${s.peers} peers`;
+    if (s.nudge_ms) c += `, nudged ${s.nudge_ms >= 0 ? '+' : ''}${s.nudge_ms.toFixed(0)} ms`;
+    $('clock').textContent = c;
+    if (document.activeElement !== $('clockSelect')) $('clockSelect').value = s.clock;
+  }
   if (s.key_route && document.activeElement !== $('routeSelect')) $('routeSelect').value = s.key_route;
   const rate = state.hello?.model_rate_hz || 25;
   $('key').textContent = s.key_pose === 'pending'
@@ -323,6 +335,12 @@ function onHello(h) {
   document.body.classList.toggle('no-accent', !honours.beat_accent);
   const moves = h.moves ?? [];
   document.body.classList.toggle('no-moves', moves.length < 2);
+  $('clockSelect').replaceChildren(...(h.clocks || []).map((name) => {
+    const o = document.createElement('option');
+    o.value = name;
+    o.textContent = name;
+    return o;
+  }));
   $('movesSelect').replaceChildren(...moves.map((name) => {
     const o = document.createElement('option');
     o.value = name;
@@ -432,6 +450,12 @@ $('accentSlider').oninput = throttled((e) => send('/danced/control/accent', [['f
 $('styleSelect').onchange = (e) => send('/danced/control/style', [['s', e.target.value]]);
 $('routeSelect').onchange = (e) => send('/danced/control/keypose/route', [['s', e.target.value]]);
 $('movesSelect').onchange = (e) => send('/danced/control/moves', [['s', e.target.value], ['s', 'bar']]);
+$('clockSelect').onchange = (e) => send('/danced/control/clock', [['s', e.target.value]]);
+// Taps go out on pointerdown: a click waits for the release, which would put every beat late.
+$('tap').onpointerdown = () => send('/danced/control/tap');
+$('one').onclick = () => send('/danced/control/clock/one');
+$('earlier').onclick = () => send('/danced/control/clock/nudge', [['f', -10]]);
+$('later').onclick = () => send('/danced/control/clock/nudge', [['f', 10]]);
 $('pause').onclick = () => send($('pause').dataset.paused ? '/danced/control/resume' : '/danced/control/pause');
 $('seed').onclick = () => send('/danced/control/seed', [['i', Math.floor(Math.random() * 2147483647)]]);
 

@@ -131,6 +131,15 @@ pub fn run_live(config: &Config, audio: AudioSource, mode: RunMode) -> Result<St
             } else {
                 Vec::new()
             },
+            clocks: ClockSource::ALL
+                .into_iter()
+                .filter(|c| match c {
+                    ClockSource::Midi => config.control.midi_port.is_some(),
+                    ClockSource::Link => config.clock.link,
+                    ClockSource::Audio | ClockSource::Tap => true,
+                })
+                .map(ClockSource::name)
+                .collect(),
             ..ViewHello::default()
         };
         let feed = LiveFeed {

@@ -33,6 +33,9 @@ pub struct ViewHello {
     pub stage: Option<model::stage::StageSettings>,
     /// The dancer's sets of moves the page offers a selector for (empty: it has one).
     pub moves: Vec<String>,
+    /// The clocks the run can follow (`audio` and `tap` always; `midi` with a MIDI port,
+    /// `link` with Link joined); empty for playback.
+    pub clocks: Vec<&'static str>,
 }
 
 /// The run as the HUD shows it.
@@ -60,6 +63,16 @@ pub struct ViewStatus {
     pub key_pose_frames_to_go: u32,
     /// The set of moves danced (None: a dancer with one).
     pub moves: Option<String>,
+    /// The clock followed: `audio`, `midi`, `link` or `tap`.
+    pub clock: &'static str,
+    /// Tempo of the grid followed, BPM (0 while none is).
+    pub clock_tempo_bpm: f32,
+    /// How far the music is heard from an external clock, ms (None: not measured).
+    pub clock_offset_ms: Option<f32>,
+    /// The nudges added up, ms.
+    pub nudge_ms: f32,
+    /// Link peers.
+    pub peers: u32,
     /// Whether the dancer is paused.
     pub paused: bool,
     /// Added latency p99 of the sender, ms.
@@ -98,6 +111,11 @@ impl ViewStatus {
                 .flatten(),
             key_pose_frames_to_go: stats.key_pose_frames_to_go.load(Ordering::Relaxed),
             moves: stats.moves_danced().map(str::to_owned),
+            clock: stats.clock.source().name(),
+            clock_tempo_bpm: stats.clock.tempo_bpm.get(),
+            clock_offset_ms: stats.clock.offset(),
+            nudge_ms: stats.clock.nudge_ms.get(),
+            peers: stats.clock.peers.load(Ordering::Relaxed),
             paused: stats.paused.load(Ordering::Relaxed) == 1,
             latency_p99_ms: stats.latency.quantile_ms(0.99),
             frames_sent: stats.frames_sent.load(Ordering::Relaxed),
