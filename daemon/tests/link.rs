@@ -31,19 +31,38 @@ fn a_link_session_is_followed_within_5_ms_and_led_within_20_ms_of_the_music() {
         testkit::skip(stderr.trim());
         return;
     }
-    assert!(out.status.success(), "{stderr}\n{}", String::from_utf8_lossy(&out.stdout));
+    assert!(
+        out.status.success(),
+        "{stderr}\n{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
     eprintln!("{}", String::from_utf8_lossy(&out.stdout));
     let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let follow = &v["link_follow"][0];
     assert!(follow["beats"].as_u64().unwrap() >= 8, "{follow}");
     assert!(follow["offset_ms_p50"].as_f64().unwrap() <= 5.0, "{follow}");
-    let lock = follow["lock_after_change_beats"].as_f64().expect("locked again");
-    assert!(lock <= 1.0, "locked {lock} beats after the change: {follow}");
-    assert!((follow["tempo_at_end"].as_f64().unwrap() - 140.0).abs() < 0.1, "{follow}");
+    let lock = follow["lock_after_change_beats"]
+        .as_f64()
+        .expect("locked again");
+    assert!(
+        lock <= 1.0,
+        "locked {lock} beats after the change: {follow}"
+    );
+    assert!(
+        (follow["tempo_at_end"].as_f64().unwrap() - 140.0).abs() < 0.1,
+        "{follow}"
+    );
     assert!(follow["peers"].as_u64().unwrap() >= 1, "{follow}");
+    assert_eq!(
+        follow["beats_off_after_change"].as_u64(),
+        Some(0),
+        "{follow}"
+    );
+    assert_eq!(follow["rt_allocations"].as_u64(), Some(0), "{follow}");
     let lead = &v["link_lead"][0];
     assert!(lead["beats"].as_u64().unwrap() >= 8, "{lead}");
     assert!(lead["offset_ms_p50"].as_f64().unwrap() <= 20.0, "{lead}");
     assert!(lead["tempo_error_bpm"].as_f64().unwrap() <= 0.5, "{lead}");
+    assert_eq!(lead["rt_allocations"].as_u64(), Some(0), "{lead}");
     let _ = std::fs::remove_dir_all(&dir);
 }

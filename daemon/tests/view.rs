@@ -286,7 +286,11 @@ fn the_page_shows_the_live_dancer_on_a_vrm_where_our_kinematics_puts_it() {
          && document.getElementById('clockSelect').options.length === 2",
         Duration::from_secs(10),
     );
-    assert!(hud.is_ok(), "{:?}", page.eval("document.getElementById('clock').textContent"));
+    assert!(
+        hud.is_ok(),
+        "{:?}",
+        page.eval("document.getElementById('clock').textContent")
+    );
 
     let png = page.screenshot_png().unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");

@@ -222,16 +222,26 @@ impl MidiClockFollower {
     }
 }
 
+/// Ticks a leader may fall behind (a stalled machine) and still catch up by sending the
+/// missed ones at once: a quarter of a beat. Further behind, or a grid moved further back, the
+/// transport restarts.
+pub const CATCH_UP_TICKS: f64 = 6.0;
+
 /// Leads a MIDI clock from a beat grid: which message is due next, and when. The caller
 /// sleeps until then and sends it. Start goes out just before a bar's first beat (the tick
 /// after Start is the song's first beat), then a tick every 24th of a beat; a grid that is
-/// lost stops the transport. Ticks never run backwards: a grid moved later waits, a grid moved
-/// earlier skips the ticks already past (counted).
+/// lost stops the transport.
+///
+/// A receiver counts ticks to know where in the song it is, so none is ever dropped: ticks a
+/// stall left behind go out at once (up to [`CATCH_UP_TICKS`]). A grid that jumps further — a
+/// nudge, "beat one is now", a new phase — would leave a counting receiver a fraction of a beat
+/// off for good: the transport restarts instead (Stop, then Start before the grid's next bar),
+/// counted in [`MidiClockLeader::restarts`].
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MidiClockLeader {
     /// Tick number (24ths of the grid's beats) of the next tick, once started.
     next_tick: Option<i64>,
-    skipped: u64,
+    restarts: u64,
 }
 
 impl MidiClockLeader {
@@ -240,9 +250,9 @@ impl MidiClockLeader {
         Self::default()
     }
 
-    /// Ticks skipped because the grid jumped ahead of them.
-    pub fn skipped(&self) -> u64 {
-        self.skipped
+    /// Restarts after a jump of the grid.
+    pub fn restarts(&self) -> u64 {
+        self.restarts
     }
 
     /// Whether Start has gone out (and Stop not since).
@@ -275,15 +285,14 @@ impl MidiClockLeader {
                 ))
             }
             Some(tick) => {
-                let due_beat = tick as f64 / TICKS_PER_BEAT as f64;
-                let mut due = grid.time_of(due_beat);
-                let mut tick = tick;
-                if due < now_us - per_tick {
-                    // The grid jumped ahead (a nudge, a new phase): skip what is past.
-                    let now_tick = (grid.beat_at(now_us) * TICKS_PER_BEAT as f64).ceil() as i64;
-                    self.skipped += (now_tick - tick).max(0) as u64;
-                    tick = now_tick.max(tick);
-                    due = grid.time_of(tick as f64 / TICKS_PER_BEAT as f64);
+                let due = grid.time_of(tick as f64 / TICKS_PER_BEAT as f64);
+                let behind = (now_us - due) / per_tick;
+                // Normally the next tick is due within a tick from now.
+                let ahead = (due - now_us) / per_tick - 1.0;
+                if behind > CATCH_UP_TICKS || ahead > CATCH_UP_TICKS {
+                    self.next_tick = None;
+                    self.restarts += 1;
+                    return Some((now_us, MidiMessage::Stop));
                 }
                 self.next_tick = Some(tick + 1);
                 Some((due, MidiMessage::Clock))
@@ -433,8 +442,11 @@ mod tests {
         let tick_us = 500_000.0 / 24.0;
         assert!((due - (2_000_000.0 - 0.5 * tick_us)).abs() < 1e-6);
         let mut prev: Option<f64> = None;
+        let mut now = due;
         for i in 0..48 {
-            let (due, m) = lead.next(Some(&grid), due).unwrap();
+            // Each asked for when the one before went out.
+            let (due, m) = lead.next(Some(&grid), now).unwrap();
+            now = due;
             assert_eq!(m, MidiMessage::Clock);
             assert!((due - (2_000_000.0 + i as f64 * tick_us)).abs() < 1e-6);
             if let Some(p) = prev {
@@ -473,17 +485,49 @@ mod tests {
     }
 
     #[test]
-    fn the_leader_skips_ticks_a_jump_ahead_left_behind() {
+    fn the_leader_catches_up_after_a_stall_and_restarts_after_a_jump() {
         let grid = ClockGrid::new(0.0, 0.0, 120.0, 4).unwrap();
+        let tick_us = 500_000.0 / 24.0;
         let mut lead = MidiClockLeader::new();
         let (mut due, _) = lead.next(Some(&grid), 0.0).unwrap();
         for _ in 0..10 {
             due = lead.next(Some(&grid), due).unwrap().0;
         }
-        // Half a beat earlier: 12 ticks are already past and are not sent late.
+        // A 3-tick stall: the missed ticks are due in the past and go out at once, in order.
+        let now = due + 3.0 * tick_us;
+        let mut sent = Vec::new();
+        for _ in 0..4 {
+            let (d, m) = lead.next(Some(&grid), now).unwrap();
+            assert_eq!(m, MidiMessage::Clock);
+            sent.push(d);
+        }
+        assert!(
+            sent.windows(2)
+                .all(|w| (w[1] - w[0] - tick_us).abs() < 1e-6)
+        );
+        assert_eq!(lead.restarts(), 0);
+        // Half a beat earlier (12 ticks): Stop, then Start before the next bar.
         let jumped = grid.delayed(-250_000.0);
-        let (next, _) = lead.next(Some(&jumped), due).unwrap();
-        assert!(next >= due - 1.0, "{next} {due}");
-        assert!(lead.skipped() >= 11, "{}", lead.skipped());
+        let now = sent[3] + tick_us;
+        assert_eq!(
+            lead.next(Some(&jumped), now),
+            Some((now, MidiMessage::Stop))
+        );
+        assert_eq!(lead.restarts(), 1);
+        let (start_due, m) = lead.next(Some(&jumped), now).unwrap();
+        assert_eq!(m, MidiMessage::Start);
+        let bar = jumped.beat_at(start_due + 0.5 * tick_us);
+        assert!(
+            (bar / 4.0 - (bar / 4.0).round()).abs() < 1e-9,
+            "Start before a bar: {bar}"
+        );
+        // A grid moved back by half a beat restarts too.
+        let mut lead = MidiClockLeader::new();
+        let (mut due, _) = lead.next(Some(&grid), 0.0).unwrap();
+        for _ in 0..5 {
+            due = lead.next(Some(&grid), due).unwrap().0;
+        }
+        let back = grid.delayed(250_000.0);
+        assert_eq!(lead.next(Some(&back), due), Some((due, MidiMessage::Stop)));
     }
 }

@@ -109,10 +109,14 @@ pub struct MidiOutRow {
     pub spacing_jitter_ms_p99: f64,
     /// See `spacing_jitter_ms_p50`.
     pub spacing_jitter_ms_max: f64,
-    /// |send time − due time|, ms, 99th percentile.
+    /// |send time − the nearest tick of the grid|, ms, 99th percentile.
     pub lateness_ms_p99: f64,
-    /// |tempo a receiver reads − the grid's|, BPM (largest, from one beat on).
-    pub receiver_tempo_error: f64,
+    /// |tempo a receiver reads − the grid's|, BPM, from one beat on: median and largest.
+    pub receiver_tempo_error_p50: f64,
+    /// See `receiver_tempo_error_p50`.
+    pub receiver_tempo_error_max: f64,
+    /// Transport restarts (a stall longer than a quarter beat).
+    pub restarts: u64,
     /// Whether the first tick fell on a bar's first beat.
     pub started_on_a_bar: bool,
 }
@@ -170,20 +174,28 @@ pub fn midi_clock_out(bpm: f64, seconds: f64, realtime: bool) -> Result<MidiOutR
         .unwrap_or(0.0);
     let lateness: Vec<f64> = ticks
         .iter()
-        .enumerate()
-        .map(|(i, &t)| (t - grid.time_of(first_beat + i as f64 / 24.0)).abs() * 1e-3)
+        .map(|&t| {
+            let nearest = (grid.beat_at(t) * 24.0).round() / 24.0;
+            (t - grid.time_of(nearest)).abs() * 1e-3
+        })
         .collect();
     let mut follower = MidiClockFollower::new();
-    follower.message(0, &MidiMessage::Start);
-    let mut receiver_tempo_error = 0.0f64;
-    for (i, &t) in ticks.iter().enumerate() {
-        follower.message(t as u64, &MidiMessage::Clock);
-        if i >= 24
-            && let Some(b) = follower.tempo_bpm(t as u64)
+    let mut receiver_errors = Vec::with_capacity(ticks.len());
+    for &(t, status) in &sent {
+        let message = match status {
+            0xfa => MidiMessage::Start,
+            0xfc => MidiMessage::Stop,
+            _ => MidiMessage::Clock,
+        };
+        follower.message(t as u64, &message);
+        if let Some(b) = follower.tempo_bpm(t as u64)
+            && follower.running()
         {
-            receiver_tempo_error = receiver_tempo_error.max((b - bpm).abs());
+            receiver_errors.push((b - bpm).abs());
         }
     }
+    // From one beat of ticks on.
+    let receiver_errors = receiver_errors.get(24..).unwrap_or(&[]);
     Ok(MidiOutRow {
         bpm,
         ticks: ticks.len(),
@@ -191,7 +203,9 @@ pub fn midi_clock_out(bpm: f64, seconds: f64, realtime: bool) -> Result<MidiOutR
         spacing_jitter_ms_p99: quantile(&spacing, 0.99),
         spacing_jitter_ms_max: spacing.iter().copied().fold(0.0, f64::max),
         lateness_ms_p99: quantile(&lateness, 0.99),
-        receiver_tempo_error,
+        receiver_tempo_error_p50: quantile(receiver_errors, 0.5),
+        receiver_tempo_error_max: receiver_errors.iter().copied().fold(0.0, f64::max),
+        restarts: ctx.stats.clock.midi_restarts.load(Ordering::Relaxed),
         started_on_a_bar: sent.first().is_some_and(|s| s.1 == 0xfa)
             && (first_beat as i64).rem_euclid(4) == 0,
     })

@@ -95,6 +95,8 @@ struct Replayed {
     origin_us: f64,
     /// The run's clock summary.
     clock: crate::live::stats::ClockReport,
+    /// Allocations counted on the real-time threads during the run.
+    rt_allocations: u64,
 }
 
 fn replay_with_clocks(mut config: Config, audio: &ReplayAudio, seconds: f64) -> Result<Replayed> {
@@ -108,6 +110,7 @@ fn replay_with_clocks(mut config: Config, audio: &ReplayAudio, seconds: f64) -> 
     let (wiring, threads) = crate::live::run::start_clocks(&config, &desk, feed, &ctx)?;
     let (writer, reader) = ctx.ring();
     let hub = ControlHub::new(&MemoryPoseBank::new(), ctx.stats.clone()).with_clock(desk);
+    let allocations_before = crate::live::stats::ThreadAllocations::now().total();
     let pipeline = Pipeline::start(
         &ctx,
         PipelineSettings::default(),
@@ -156,6 +159,7 @@ fn replay_with_clocks(mut config: Config, audio: &ReplayAudio, seconds: f64) -> 
     Ok(Replayed {
         beats,
         origin_us: epoch_mono_us + origin_ns as f64 * 1e-3,
+        rt_allocations: report.allocations.total() - allocations_before,
         clock: report.clock,
     })
 }
@@ -188,6 +192,11 @@ pub struct LinkFollow {
     /// From the leader's tempo change to the first beat from which every beat is within
     /// [`LOCKED_MS`] again, in beats of the new tempo (`None`: never).
     pub lock_after_change_beats: Option<f64>,
+    /// Beats received after the change that were further than [`LOCKED_MS`] from the
+    /// session's (before it locked again).
+    pub beats_off_after_change: usize,
+    /// Allocations on the real-time threads during the run (must be 0).
+    pub rt_allocations: u64,
     /// The tempo the run followed at its end, BPM.
     pub tempo_at_end: f32,
     /// Link peers danced saw at its end.
@@ -243,15 +252,17 @@ pub fn follow(peer: &Path, seconds: f64, bpm: f64, to_bpm: f64) -> Result<LinkFo
         .filter(|(t, _)| *t >= change_us)
         .collect();
     // The first beat after the change from which every later one is locked.
-    let lock = (0..after.len())
-        .find(|&i| after[i..].iter().all(|(_, o)| o.abs() <= LOCKED_MS))
-        .map(|i| (after[i].0 - change_us) * 1e-6 * to_bpm / 60.0);
+    let locked_from =
+        (0..after.len()).find(|&i| after[i..].iter().all(|(_, o)| o.abs() <= LOCKED_MS));
+    let lock = locked_from.map(|i| (after[i].0 - change_us) * 1e-6 * to_bpm / 60.0);
     Ok(LinkFollow {
         bpm: (bpm, to_bpm),
         beats: steady.len(),
         offset_ms_p50: quantile(&steady, 0.5),
         offset_ms_p95: quantile(&steady, 0.95),
         lock_after_change_beats: lock,
+        beats_off_after_change: locked_from.unwrap_or(after.len()),
+        rt_allocations: run.rt_allocations,
         tempo_at_end: run.clock.tempo_bpm,
         peers: run.clock.peers,
     })
@@ -274,6 +285,8 @@ pub struct LinkLead {
     pub bias_ms: f64,
     /// |session tempo − the song's|, BPM, median over the beats compared.
     pub tempo_error_bpm: f64,
+    /// Allocations on the real-time threads during the run (must be 0).
+    pub rt_allocations: u64,
 }
 
 /// Replays `audio` (whose beats fall at `beats_s`) for `seconds` with Link joined and the beat
@@ -286,6 +299,11 @@ pub fn lead(
     seconds: f64,
     settle_s: f64,
 ) -> Result<LinkLead> {
+    // Only while the song plays: after its end the session runs on by itself.
+    let length_s = audio.samples.len() as f64
+        / f64::from(audio.channels.max(1))
+        / f64::from(audio.sample_rate.max(1));
+    let seconds = seconds.min(length_s);
     let reader = Peer::start(
         peer,
         &["read".into(), "4".into(), (seconds + 3.0).to_string()],
@@ -321,5 +339,6 @@ pub fn lead(
         offset_ms_p95: quantile(&abs, 0.95),
         bias_ms: quantile(&offsets, 0.5),
         tempo_error_bpm: quantile(&tempi, 0.5),
+        rt_allocations: run.rt_allocations,
     })
 }

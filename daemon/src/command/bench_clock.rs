@@ -98,19 +98,21 @@ pub fn bench_clock(args: BenchClockArgs) -> Result<()> {
         }
         println!("MIDI clock out: when each message was handed to the port, this machine");
         println!(
-            "| BPM | ticks | spacing jitter p50 / p99 / max (ms) | lateness p99 (ms) | receiver's tempo error (BPM) | Start on a bar |"
+            "| BPM | ticks | spacing jitter p50 / p99 / max (ms) | lateness p99 (ms) | receiver's tempo error p50 / max (BPM) | restarts | Start on a bar |"
         );
-        println!("| --- | --- | --- | --- | --- | --- |");
+        println!("| --- | --- | --- | --- | --- | --- | --- |");
         for r in &out.midi_out {
             println!(
-                "| {:.0} | {} | {:.3} / {:.3} / {:.3} | {:.3} | {:.3} | {} |",
+                "| {:.0} | {} | {:.3} / {:.3} / {:.3} | {:.3} | {:.3} / {:.3} | {} | {} |",
                 r.bpm,
                 r.ticks,
                 r.spacing_jitter_ms_p50,
                 r.spacing_jitter_ms_p99,
                 r.spacing_jitter_ms_max,
                 r.lateness_ms_p99,
-                r.receiver_tempo_error,
+                r.receiver_tempo_error_p50,
+                r.receiver_tempo_error_max,
+                r.restarts,
                 if r.started_on_a_bar { "yes" } else { "no" }
             );
         }
@@ -151,12 +153,12 @@ fn link(args: &BenchClockArgs, out: &mut ClockBench) -> Result<()> {
             "Link followed: a peer leads at 128 BPM, then 140 from halfway; /danced/beat received over OSC against the session's beats (read by another peer)"
         );
         println!(
-            "| BPM | beats | offset p50 / p95 (ms) | locked again after the change (beats) | tempo at the end | peers |"
+            "| BPM | beats | offset p50 / p95 (ms) | after the change: locked from (beats), beats off | tempo at the end | peers | real-time allocations |"
         );
-        println!("| --- | --- | --- | --- | --- | --- |");
+        println!("| --- | --- | --- | --- | --- | --- | --- |");
         for r in &out.link_follow {
             println!(
-                "| {:.0} → {:.0} | {} | {:.2} / {:.2} | {} | {:.2} | {} |",
+                "| {:.0} → {:.0} | {} | {:.2} / {:.2} | {}, {} | {:.2} | {} | {} |",
                 r.bpm.0,
                 r.bpm.1,
                 r.beats,
@@ -164,8 +166,10 @@ fn link(args: &BenchClockArgs, out: &mut ClockBench) -> Result<()> {
                 r.offset_ms_p95,
                 r.lock_after_change_beats
                     .map_or("never".into(), |b| format!("{b:.2}")),
+                r.beats_off_after_change,
                 r.tempo_at_end,
-                r.peers
+                r.peers,
+                r.rt_allocations
             );
         }
         println!();
@@ -203,18 +207,21 @@ fn link(args: &BenchClockArgs, out: &mut ClockBench) -> Result<()> {
         println!(
             "Link led from the music heard: the session's beats (read by a peer) against the song's annotated beats as heard, from 8 s in"
         );
-        println!("| song | BPM | beats | offset p50 / p95 (ms) | bias (ms) | tempo error (BPM) |");
-        println!("| --- | --- | --- | --- | --- | --- |");
+        println!(
+            "| song | BPM | beats | offset p50 / p95 (ms) | bias (ms) | tempo error (BPM) | real-time allocations |"
+        );
+        println!("| --- | --- | --- | --- | --- | --- | --- |");
         for r in &out.link_lead {
             println!(
-                "| {} | {:.1} | {} | {:.1} / {:.1} | {:+.1} | {:.2} |",
+                "| {} | {:.1} | {} | {:.1} / {:.1} | {:+.1} | {:.2} | {} |",
                 r.song,
                 r.bpm,
                 r.beats,
                 r.offset_ms_p50,
                 r.offset_ms_p95,
                 r.bias_ms,
-                r.tempo_error_bpm
+                r.tempo_error_bpm,
+                r.rt_allocations
             );
         }
         println!();

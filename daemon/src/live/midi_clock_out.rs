@@ -95,8 +95,8 @@ fn run(
         leader = plan;
         stats
             .clock
-            .midi_ticks_skipped
-            .store(leader.skipped(), Ordering::Relaxed);
+            .midi_restarts
+            .store(leader.restarts(), Ordering::Relaxed);
     }
     if leader.started() {
         send(&mut port, MidiMessage::Stop);

@@ -436,7 +436,7 @@ fn clock_summary(c: &super::stats::ClockReport) -> String {
         .map(|o| format!(", heard {o:+.1} ms from it"))
         .unwrap_or_default();
     format!(
-        "{} at {:.1} BPM{offset}, trimmed {:+.1} ms, nudged {:+.1} ms, {} frames on the heard beats for want of it, {} Link peers; MIDI clock out {} ticks, {} skipped, {} refused",
+        "{} at {:.1} BPM{offset}, trimmed {:+.1} ms, nudged {:+.1} ms, {} frames on the heard beats for want of it, {} Link peers; MIDI clock out {} ticks, {} restarts after a jump, {} refused",
         c.source,
         c.tempo_bpm,
         c.trim_ms,
@@ -444,7 +444,7 @@ fn clock_summary(c: &super::stats::ClockReport) -> String {
         c.fallback_frames,
         c.peers,
         c.midi_ticks_sent,
-        c.midi_ticks_skipped,
+        c.midi_restarts,
         c.midi_send_errors,
     )
 }

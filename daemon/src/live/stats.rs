@@ -489,8 +489,8 @@ pub struct ClockGauges {
     pub peers: AtomicU32,
     /// MIDI clock ticks sent.
     pub midi_ticks_sent: AtomicU64,
-    /// MIDI clock ticks skipped because the grid jumped past them.
-    pub midi_ticks_skipped: AtomicU64,
+    /// Times the MIDI clock sent restarted its transport after the grid jumped.
+    pub midi_restarts: AtomicU64,
     /// MIDI clock messages the output port refused.
     pub midi_send_errors: AtomicU64,
 }
@@ -508,7 +508,7 @@ impl Default for ClockGauges {
             fallback_frames: AtomicU64::new(0),
             peers: AtomicU32::new(0),
             midi_ticks_sent: AtomicU64::new(0),
-            midi_ticks_skipped: AtomicU64::new(0),
+            midi_restarts: AtomicU64::new(0),
             midi_send_errors: AtomicU64::new(0),
         }
     }
@@ -541,7 +541,7 @@ impl ClockGauges {
             fallback_frames: load(&self.fallback_frames),
             peers: self.peers.load(Ordering::Relaxed),
             midi_ticks_sent: load(&self.midi_ticks_sent),
-            midi_ticks_skipped: load(&self.midi_ticks_skipped),
+            midi_restarts: load(&self.midi_restarts),
             midi_send_errors: load(&self.midi_send_errors),
         }
     }
@@ -567,8 +567,8 @@ pub struct ClockReport {
     pub peers: u32,
     /// MIDI clock ticks sent.
     pub midi_ticks_sent: u64,
-    /// MIDI clock ticks skipped.
-    pub midi_ticks_skipped: u64,
+    /// Times the MIDI clock sent restarted (Stop, Start) after the grid jumped.
+    pub midi_restarts: u64,
     /// MIDI clock messages the output port refused.
     pub midi_send_errors: u64,
 }
