@@ -225,6 +225,29 @@ pub trait MotionSource {
     }
 }
 
+/// A source that stands still in the rest pose at 25 frames a second: for measuring what is
+/// not the dance (the beats, the clocks) through the live pipeline.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Standing;
+
+impl MotionSource for Standing {
+    fn frame_rate(&self) -> f64 {
+        25.0
+    }
+
+    fn lookahead_frames(&self) -> usize {
+        0
+    }
+
+    fn step(&mut self, _music: &[[f32; FEATURE_DIM]], _controls: &Controls, out: &mut Pose) {
+        *out = Pose::rest();
+    }
+
+    fn reset(&mut self, _seed: u64) {}
+
+    fn reseed(&mut self, _seed: u64) {}
+}
+
 /// A boxed source is a source (so a stage can hold whichever the daemon opened).
 impl<S: MotionSource + ?Sized> MotionSource for Box<S> {
     fn frame_rate(&self) -> f64 {

@@ -43,21 +43,7 @@ impl MidiInputs {
         let mut input = midir::MidiInput::new(CLIENT_NAME)
             .map_err(|e| ProtocolError::MidiUnavailable(e.to_string()))?;
         input.ignore(midir::Ignore::SysexAndActiveSense);
-        let wanted = port_name_substring.to_lowercase();
-        let ports = input.ports();
-        let names: Vec<String> = ports
-            .iter()
-            .map(|p| input.port_name(p).unwrap_or_default())
-            .collect();
-        let Some(index) = names
-            .iter()
-            .position(|n| n.to_lowercase().contains(&wanted))
-        else {
-            return Err(ProtocolError::MidiPortNotFound {
-                wanted: port_name_substring.to_string(),
-                available: names,
-            });
-        };
+        let (port, port_name) = port_matching(&input, port_name_substring)?;
         let skipped = Arc::new(AtomicU64::new(0));
         let dropped = Arc::new(AtomicU64::new(0));
         let (skipped_cb, dropped_cb) = (Arc::clone(&skipped), Arc::clone(&dropped));
@@ -70,9 +56,8 @@ impl MidiInputs {
                 dropped_cb.fetch_add(1, Ordering::Relaxed);
             }
         };
-        let port_name = names[index].clone();
         let connection = input
-            .connect(&ports[index], "danced-in", callback, ())
+            .connect(&port, "danced-in", callback, ())
             .map_err(|e| ProtocolError::MidiConnect {
                 port: port_name.clone(),
                 reason: e.to_string(),
@@ -83,6 +68,27 @@ impl MidiInputs {
             skipped,
             dropped,
         })
+    }
+}
+
+/// The first port of `io` whose name contains `wanted` (case-insensitive), with its name; the
+/// error lists the ports there are.
+pub(crate) fn port_matching<IO: midir::MidiIO>(
+    io: &IO,
+    wanted: &str,
+) -> Result<(IO::Port, String), ProtocolError> {
+    let lower = wanted.to_lowercase();
+    let ports = io.ports();
+    let names: Vec<String> = ports
+        .iter()
+        .map(|p| io.port_name(p).unwrap_or_default())
+        .collect();
+    match names.iter().position(|n| n.to_lowercase().contains(&lower)) {
+        Some(i) => Ok((ports[i].clone(), names[i].clone())),
+        None => Err(ProtocolError::MidiPortNotFound {
+            wanted: wanted.to_string(),
+            available: names,
+        }),
     }
 }
 

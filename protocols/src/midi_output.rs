@@ -25,28 +25,14 @@ impl MidiOutConnection {
     pub fn connect(port_name_substring: &str) -> Result<Self, ProtocolError> {
         let output = midir::MidiOutput::new(CLIENT_NAME)
             .map_err(|e| ProtocolError::MidiUnavailable(e.to_string()))?;
-        let wanted = port_name_substring.to_lowercase();
-        let ports = output.ports();
-        let names: Vec<String> = ports
-            .iter()
-            .map(|p| output.port_name(p).unwrap_or_default())
-            .collect();
-        let Some(index) = names
-            .iter()
-            .position(|n| n.to_lowercase().contains(&wanted))
-        else {
-            return Err(ProtocolError::MidiPortNotFound {
-                wanted: port_name_substring.to_string(),
-                available: names,
-            });
-        };
-        let port_name = names[index].clone();
-        let connection = output.connect(&ports[index], "danced-clock").map_err(|e| {
-            ProtocolError::MidiConnect {
-                port: port_name.clone(),
-                reason: e.to_string(),
-            }
-        })?;
+        let (port, port_name) = crate::midi_input::port_matching(&output, port_name_substring)?;
+        let connection =
+            output
+                .connect(&port, "danced-clock")
+                .map_err(|e| ProtocolError::MidiConnect {
+                    port: port_name.clone(),
+                    reason: e.to_string(),
+                })?;
         Ok(Self {
             connection,
             port_name,

@@ -17,7 +17,6 @@ use daemon::live::pipeline::{Pipeline, PipelineParts, PipelineSettings};
 use daemon::live::replay::{self, ReplayAudio, ReplaySettings};
 use daemon::live::sink::MemoryPoseBank;
 use daemon::live::wire::ControlEvent;
-use model::rig::Pose;
 use protocols::{MidiMap, MidiMessage};
 
 #[global_allocator]
@@ -26,28 +25,6 @@ static ALLOCATOR: daemon::alloc_counter::CountingAllocator =
 
 const RATE: u32 = 44_100;
 const CLICK_BPM: f64 = 120.0;
-
-/// A dancer that stands still: the beats are what is measured here.
-struct Standing;
-
-impl model::source::MotionSource for Standing {
-    fn frame_rate(&self) -> f64 {
-        25.0
-    }
-    fn lookahead_frames(&self) -> usize {
-        0
-    }
-    fn step(
-        &mut self,
-        _music: &[[f32; dsp::feature::FEATURE_DIM]],
-        _controls: &model::source::Controls,
-        out: &mut Pose,
-    ) {
-        *out = Pose::rest();
-    }
-    fn reset(&mut self, _seed: u64) {}
-    fn reseed(&mut self, _seed: u64) {}
-}
 
 /// A tiny deterministic generator for the stamps' jitter.
 fn lcg(state: &mut u64) -> f64 {
@@ -120,7 +97,7 @@ fn follow(seconds: f64, clock: Clock<'_>, controls: Vec<(f64, ControlEvent)>) ->
         &ctx,
         PipelineSettings::default(),
         PipelineParts {
-            source: Box::new(Standing),
+            source: Box::new(model::source::Standing),
             sink: Box::new(sink),
             controls: hub,
             clock: Some(ClockWiring {

@@ -119,6 +119,8 @@ pub struct MidiOutRow {
     pub restarts: u64,
     /// Whether the first tick fell on a bar's first beat.
     pub started_on_a_bar: bool,
+    /// Whether Stop went out when the thread ended.
+    pub stopped_at_end: bool,
 }
 
 /// Records when each message was handed to the port, µs since the run's epoch.
@@ -208,6 +210,7 @@ pub fn midi_clock_out(bpm: f64, seconds: f64, realtime: bool) -> Result<MidiOutR
         restarts: ctx.stats.clock.midi_restarts.load(Ordering::Relaxed),
         started_on_a_bar: sent.first().is_some_and(|s| s.1 == 0xfa)
             && (first_beat as i64).rem_euclid(4) == 0,
+        stopped_at_end: sent.last().is_some_and(|s| s.1 == 0xfc),
     })
 }
 

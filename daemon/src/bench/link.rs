@@ -12,7 +12,6 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use model::rig::Pose;
 use serde::Serialize;
 
 use super::clock::{monotonic_us, quantile};
@@ -27,28 +26,6 @@ use crate::live::sink::MemoryPoseBank;
 
 /// Received beats within this of the session's count as locked, ms.
 const LOCKED_MS: f64 = 5.0;
-
-/// A dancer that stands still: the beats are what is measured.
-struct Standing;
-
-impl model::source::MotionSource for Standing {
-    fn frame_rate(&self) -> f64 {
-        25.0
-    }
-    fn lookahead_frames(&self) -> usize {
-        0
-    }
-    fn step(
-        &mut self,
-        _music: &[[f32; dsp::feature::FEATURE_DIM]],
-        _controls: &model::source::Controls,
-        out: &mut Pose,
-    ) {
-        *out = Pose::rest();
-    }
-    fn reset(&mut self, _seed: u64) {}
-    fn reseed(&mut self, _seed: u64) {}
-}
 
 /// A `link-peer` process and what it prints.
 struct Peer {
@@ -115,7 +92,7 @@ fn replay_with_clocks(mut config: Config, audio: &ReplayAudio, seconds: f64) -> 
         &ctx,
         PipelineSettings::default(),
         PipelineParts {
-            source: Box::new(Standing),
+            source: Box::new(model::source::Standing),
             sink: Box::new(sink),
             controls: hub,
             clock: Some(wiring),

@@ -115,17 +115,14 @@ impl GridSteer {
         t_s: f64,
         map: &WallMap,
     ) -> Steered {
-        let external = match (snapshot.source, snapshot.grid) {
-            (ClockSource::Audio, _) => None,
-            (_, grid) => Some(grid),
+        // `Some(None)`: an external clock chosen that has no grid to give.
+        let external = match snapshot.source {
+            ClockSource::Audio => None,
+            _ => Some(snapshot.grid),
         };
         let mut new_offset_ms = None;
         let mut grid = match external {
-            None => {
-                self.forget_offsets();
-                *heard
-            }
-            Some(None) => {
+            None | Some(None) => {
                 self.forget_offsets();
                 *heard
             }

@@ -105,71 +105,14 @@ fn run(
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-    use std::sync::{Arc, Mutex};
-
-    /// Records when each message went out, µs since the run's epoch.
-    struct Recorder {
-        epoch: std::time::Instant,
-        sent: Arc<Mutex<Vec<(f64, u8)>>>,
-    }
-
-    impl ClockPort for Recorder {
-        fn send(&mut self, bytes: &[u8]) -> bool {
-            let t = self.epoch.elapsed().as_secs_f64() * 1e6;
-            if let Ok(mut v) = self.sent.lock() {
-                v.push((t, bytes[0]));
-            }
-            true
-        }
-    }
-
     #[test]
     fn ticks_go_out_evenly_from_a_start_on_the_bar_and_stop_at_the_end() {
-        let ctx = LiveContext::new();
-        let sent = Arc::new(Mutex::new(Vec::with_capacity(1000)));
-        let (mut input, output) = triple_buffer::triple_buffer(&None);
-        // 150 BPM, beat 0 at 0.1 s.
-        let grid = ClockGrid::new(100_000.0, 0.0, 150.0, 4).unwrap();
-        input.write(Some(grid));
-        let port = Recorder {
-            epoch: ctx.epoch,
-            sent: sent.clone(),
-        };
-        let handle = spawn(Box::new(port), output, &ctx, false).unwrap();
-        let deadline = std::time::Instant::now() + Duration::from_secs(10);
-        while ctx.stats.clock.midi_ticks_sent.load(Ordering::Relaxed) < 96 {
-            assert!(std::time::Instant::now() < deadline, "ticks stopped coming");
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        ctx.stop.store(true, Ordering::Relaxed);
-        handle.join().unwrap();
-        let sent = sent.lock().unwrap().clone();
-        assert_eq!(sent[0].1, 0xfa, "Start first");
-        assert_eq!(sent.last().unwrap().1, 0xfc, "Stop last");
-        let ticks: Vec<f64> = sent.iter().filter(|s| s.1 == 0xf8).map(|s| s.0).collect();
-        // The first tick is the first beat of the first bar not yet begun: beat 0 at 0.1 s.
-        assert!(
-            (ticks[0] - grid.time_of(0.0)).abs() < 2_000.0,
-            "{}",
-            ticks[0]
-        );
-        let period = grid.period_us / 24.0;
-        let mut errors: Vec<f64> = ticks
-            .iter()
-            .enumerate()
-            .map(|(i, t)| (t - grid.time_of(i as f64 / 24.0)).abs())
-            .collect();
-        errors.sort_by(f64::total_cmp);
-        let p50 = errors[errors.len() / 2];
-        assert!(
-            p50 < 1_000.0,
-            "median tick {p50:.0} µs from due (tick every {period:.0} µs)"
-        );
-        assert_eq!(
-            crate::alloc_counter::allocations(RtThread::ClockOut),
-            0,
-            "the tick loop allocated"
-        );
+        // The thread on a fixed grid into a recorder (the bench's measurement, shortened).
+        let row = crate::bench::clock::midi_clock_out(150.0, 2.0, false).unwrap();
+        assert!(row.ticks >= 100, "{row:?}");
+        assert!(row.started_on_a_bar && row.stopped_at_end, "{row:?}");
+        assert!(row.spacing_jitter_ms_p50 < 1.0, "{row:?}");
+        assert!(row.receiver_tempo_error_p50 < 0.1, "{row:?}");
+        assert_eq!(row.restarts, 0, "{row:?}");
     }
 }
