@@ -118,7 +118,11 @@ fn controller(port: u16, stop: Arc<AtomicBool>) -> JoinHandle<u64> {
                 sent += 1;
             }
             if i.is_multiple_of(75) {
-                let ms = if (i / 75).is_multiple_of(2) { 5.0 } else { -5.0 };
+                let ms = if (i / 75).is_multiple_of(2) {
+                    5.0
+                } else {
+                    -5.0
+                };
                 send("clock/nudge", vec![OscType::Float(ms)]);
                 send("clock/one", vec![]);
                 sent += 2;

@@ -646,6 +646,31 @@ mod tests {
     }
 
     #[test]
+    fn a_clock_needs_its_input_and_a_bar() {
+        let parse = |t: &str| Config::parse(t, Path::new("x.toml")).map_err(|e| e.to_string());
+        let e = parse("[clock]\nsource = \"midi\"\n").unwrap_err();
+        assert!(
+            e.contains("clock.source") && e.contains("control.midi_port"),
+            "{e}"
+        );
+        let c = parse("[control]\nmidi_port = \"x\"\n[clock]\nsource = \"MIDI\"\n").unwrap();
+        assert_eq!(c.clock.source(), super::super::clock::ClockSource::Midi);
+        let e = parse("[clock]\nsource = \"link\"\n").unwrap_err();
+        assert!(e.contains("clock.link = true"), "{e}");
+        let e = parse("[clock]\nsource = \"vinyl\"\n").unwrap_err();
+        assert!(e.contains("audio, midi, link, tap"), "{e}");
+        let e = parse("[clock]\nbeats_per_bar = 0\n").unwrap_err();
+        assert!(e.contains("clock.beats_per_bar"), "{e}");
+        assert!(parse("[clock]\nsource = \"tap\"\nbeats_per_bar = 3\n").is_ok());
+        let link = parse("[clock]\nlink = true\n");
+        if super::super::link::AVAILABLE {
+            assert!(link.is_ok(), "{link:?}");
+        } else {
+            assert!(link.unwrap_err().contains("--features link"));
+        }
+    }
+
+    #[test]
     fn vrchat_tracker_gaps_are_errors() {
         let toml = "[output.vrchat.trackers]\n1 = \"Hips\"\n3 = \"Chest\"\n";
         let e = Config::parse(toml, Path::new("x.toml"))
