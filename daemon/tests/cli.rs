@@ -421,4 +421,46 @@ fn a_folder_of_your_own_dances_becomes_a_library_and_unknown_joints_get_a_map() 
         model::retrieval::ClipLibrary::from_bytes(&std::fs::read(&out).unwrap()).unwrap();
     assert!(library.clips.len() > 20, "{} clips", library.clips.len());
     assert!(meta.contains("\"name\": \"my-moves\""), "{meta}");
+
+    // Its rhythm track: a WAV on the beat found, and the beats it plays; the analysis hears an
+    // onset on each (this synthetic routine's beats are too uneven for a steady beat tracker:
+    // the unit tests of the accompaniment check the beats and bars heard on dancers' grids).
+    let tracks = dir.join("tracks");
+    let (stdout, _) = succeed(
+        danced()
+            .args(["library", "accompany", "--bvh"])
+            .arg(&folder)
+            .arg("--out")
+            .arg(&tracks)
+            .arg("--joint-map")
+            .arg(&map_file),
+    );
+    assert!(stdout.contains("| routine |"), "{stdout}");
+    let beats = std::fs::read_to_string(tracks.join("routine.beats")).unwrap();
+    assert!(beats.lines().count() > 10, "{beats}");
+    let heard_file = dir.join("heard.onsets");
+    succeed(
+        danced()
+            .arg("analyze")
+            .arg(tracks.join("routine.wav"))
+            .arg("--onsets-out")
+            .arg(&heard_file),
+    );
+    let times = |text: &str| -> Vec<f64> {
+        text.lines()
+            .filter_map(|l| l.split_whitespace().next()?.parse().ok())
+            .collect()
+    };
+    let heard = times(&std::fs::read_to_string(&heard_file).unwrap());
+    let played = times(&beats);
+    // Every beat played is heard as an onset within 50 ms (hats between beats are onsets too).
+    let missed: Vec<f64> = played
+        .iter()
+        .copied()
+        .filter(|b| !heard.iter().any(|h| (h - b).abs() <= 0.05))
+        .collect();
+    assert!(
+        missed.is_empty(),
+        "beats without an onset: {missed:?} (heard {heard:?})"
+    );
 }

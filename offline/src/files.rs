@@ -121,3 +121,22 @@ pub fn read_beat_positions(path: &Path) -> Option<Vec<(f64, usize)>> {
     }
     (!out.is_empty()).then_some(out)
 }
+
+/// Mono float samples as a 16-bit PCM WAV file's bytes (clipped to ±1).
+pub fn wav_mono_16(samples: &[f32], rate: u32) -> Vec<u8> {
+    let spec = hound::WavSpec {
+        channels: 1,
+        sample_rate: rate,
+        bits_per_sample: 16,
+        sample_format: hound::SampleFormat::Int,
+    };
+    let mut bytes = io::Cursor::new(Vec::with_capacity(44 + 2 * samples.len()));
+    // Writing to memory cannot fail but for sizes beyond a WAV's 4 GB.
+    if let Ok(mut w) = hound::WavWriter::new(&mut bytes, spec) {
+        for &s in samples {
+            let _ = w.write_sample((s.clamp(-1.0, 1.0) * 32767.0).round() as i16);
+        }
+        let _ = w.finalize();
+    }
+    bytes.into_inner()
+}

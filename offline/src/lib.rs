@@ -8,6 +8,7 @@
 
 #![warn(missing_docs)]
 
+pub mod accompaniment;
 pub mod analysis;
 pub mod dataset;
 pub mod decode;

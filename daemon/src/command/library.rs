@@ -1,5 +1,6 @@
-//! `danced library build` and `danced library poses`: the retrieval dancer's clip library and
-//! the key-pose bank picked from it.
+//! `danced library build`, `danced library poses` and `danced library accompany`: the
+//! retrieval dancer's clip library, the key-pose bank picked from it, and rhythm tracks for
+//! dances without music.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -48,6 +49,27 @@ pub enum LibraryCommand {
         #[arg(long, default_value_t = 2)]
         jobs: usize,
     },
+    /// Render a rhythm track for each dance of a folder, on the beat found from its motion (a
+    /// kick on every beat, a backbeat, hats, a bass changing on the bars; louder where the dance
+    /// moves harder): `NAME.wav` and `NAME.beats` (time and place in the bar) in `--out`. Play
+    /// one with its dance (`danced view DANCE.bvh --audio NAME.wav`) to hear the beat found.
+    Accompany {
+        /// A folder of BVH dances (every .bvh file directly in it).
+        #[arg(long, value_name = "DIR")]
+        bvh: PathBuf,
+        /// How the dance files' joints and axes are read.
+        #[command(flatten)]
+        import: super::import_args::ImportArgs,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Draws each track's sounds and chords (the same seed, the same tracks).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Worker threads.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+    },
 }
 
 /// Runs `danced library …`.
@@ -71,7 +93,87 @@ pub fn library(what: LibraryCommand) -> Result<()> {
             ..
         } => build(&data, &out, max_poses, jobs),
         LibraryCommand::Poses { out, count } => poses(&out, count),
+        LibraryCommand::Accompany {
+            bvh,
+            import,
+            out,
+            seed,
+            jobs,
+        } => accompany(&bvh, &import, &out, seed, jobs),
     }
+}
+
+/// `library accompany`: a rhythm track for each dance of a folder.
+fn accompany(
+    dir: &Path,
+    import: &super::import_args::ImportArgs,
+    out: &Path,
+    seed: u64,
+    jobs: usize,
+) -> Result<()> {
+    use model::metrics::{JointTrack, summed_joint_speed};
+    use model::retrieval::RETRIEVAL_FPS;
+    use offline::accompaniment::{ACCOMPANIMENT_RATE, accompany, beat_intensity};
+    let settings = import.settings()?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let skeleton = model::rig::Skeleton::default_adult();
+    println!("| dance | seconds | tempo (BPM) | confidence | bar | beats | track |");
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    let mut written = 0;
+    for (i, (path, result)) in offline::moves::read_moves_folder(dir, &settings, jobs)?
+        .into_iter()
+        .enumerate()
+    {
+        let dance = match result {
+            Ok(d) => d,
+            Err(e) => {
+                println!("| {} | – | – | – | – | – | not read: {e} |", path.display());
+                continue;
+            }
+        };
+        let positions = skeleton.trajectory(&dance.poses);
+        let track = JointTrack::new(&positions, model::rig::JOINT_COUNT, RETRIEVAL_FPS)
+            .with_context(|| format!("{}", path.display()))?;
+        let intensity = beat_intensity(&dance.grid, &summed_joint_speed(&track), RETRIEVAL_FPS);
+        let music = accompany(
+            &dance.grid,
+            &intensity,
+            dance.seconds,
+            seed.wrapping_add(i as u64),
+        );
+        let wav = out.join(format!("{}.wav", dance.name));
+        write_atomic(
+            &wav,
+            &offline::files::wav_mono_16(&music.samples, ACCOMPANIMENT_RATE),
+        )
+        .with_context(|| format!("writing {}", wav.display()))?;
+        let beats: String = music
+            .beats
+            .iter()
+            .map(|(t, pos)| format!("{t:.3}\t{pos}\n"))
+            .collect();
+        let beats_path = out.join(format!("{}.beats", dance.name));
+        write_atomic(&beats_path, beats.as_bytes())
+            .with_context(|| format!("writing {}", beats_path.display()))?;
+        let bar = dance
+            .grid
+            .beats_per_bar
+            .map_or("– (4 assumed)".to_owned(), |b| format!("{b}/4"));
+        println!(
+            "| {} | {:.1} | {:.1} | {:.2} | {bar} | {} | {} |",
+            dance.name,
+            dance.seconds,
+            dance.grid.tempo_bpm,
+            dance.grid.confidence,
+            music.beats.len(),
+            wav.display()
+        );
+        written += 1;
+    }
+    if written == 0 {
+        bail!("no dance in {} could be read", dir.display());
+    }
+    Ok(())
 }
 
 fn poses(out: &Path, count: usize) -> Result<()> {
