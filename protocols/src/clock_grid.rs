@@ -67,15 +67,6 @@ impl ClockGrid {
             ..self
         }
     }
-
-    /// The same beats, re-anchored at `t_us` (keeps the numbers small and exact near now).
-    pub fn anchored_at(self, t_us: f64) -> Self {
-        ClockGrid {
-            anchor_beat: self.beat_at(t_us),
-            anchor_us: t_us,
-            ..self
-        }
-    }
 }
 
 #[cfg(test)]
@@ -92,9 +83,6 @@ mod tests {
         assert_eq!(g.index_in_bar(11), 4);
         assert_eq!(g.index_in_bar(-1), 4);
         assert_eq!(g.delayed(10_000.0).time_of(10.0), 2_010_000.0);
-        let a = g.anchored_at(3_000_000.0);
-        assert_eq!(a.anchor_beat, 12.0);
-        assert_eq!(a.time_of(10.0), g.time_of(10.0));
         assert!((g.tempo_bpm() - 120.0).abs() < 1e-12);
     }
 

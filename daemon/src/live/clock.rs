@@ -278,11 +278,6 @@ impl ClockDesk {
         r
     }
 
-    /// The newest snapshot (for the status line and the view).
-    pub fn snapshot(&self) -> ClockSnapshot {
-        self.read(|s| s.snapshot)
-    }
-
     /// The clock followed.
     pub fn source(&self) -> ClockSource {
         self.read(|s| s.snapshot.source)
@@ -307,11 +302,6 @@ impl ClockDesk {
             let bpb = s.beats_per_bar;
             s.taps.tap(now, bpb);
         });
-    }
-
-    /// Taps in the current run of taps.
-    pub fn taps_in_run(&self) -> u32 {
-        self.read(|s| s.taps.run())
     }
 
     /// Moves every beat `ms` later (earlier when negative); the total stays within
